@@ -1,0 +1,35 @@
+# Two-command set-up: `make race` and `make test` each bootstrap .venv on a fresh machine.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: race test lint format bench clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# torch first, exactly pinned, so the local CPU build is taken before anything asks for torch.
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+race: $(STAMP)
+	$(BIN)/icarus-vision race $(ARGS)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check icarus_vision tests benchmarks
+	$(BIN)/ruff format --check icarus_vision tests benchmarks
+
+format: $(STAMP)
+	$(BIN)/ruff format icarus_vision tests benchmarks
+	$(BIN)/ruff check --fix icarus_vision tests benchmarks
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/sim_throughput.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info

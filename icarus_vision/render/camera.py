@@ -1,0 +1,273 @@
+"""The FPV camera model shared by rendering, labelling and (later) PnP.
+
+Frames:
+
+* world: z up; body: FLU (x forward, y left, z up); quaternions x, y, z, w, body -> world.
+* camera: OpenCV optical frame, x right, y down, z forward (along the optical axis). With zero
+  uptilt and roll the optical axis is the body x axis, image right is body -y, image down is body -z.
+  ``uptilt_deg`` pitches the camera *up* about body y; ``roll_deg`` rolls it about its optical axis.
+* pixels: OpenCV convention, (u, v) = (column, row) with the centre of the top-left pixel at (0, 0),
+  so the image spans [-0.5, width - 0.5] x [-0.5, height - 0.5].
+
+The pure functions take batched arrays; :class:`Camera` holds the parameters and derives the
+PyBullet view and projection matrices from the very same K and extrinsics, so a rendered image and
+its labels cannot disagree.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from icarus_vision.sim.dynamics import quat_to_rot
+from icarus_vision.sim.quad import CameraParams
+
+# Columns: the optical axes (x right, y down, z forward) expressed in the FLU body frame.
+_R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+# OpenCV optical frame -> OpenGL eye frame (x right, y up, z backward).
+_CV_TO_GL = np.diag([1.0, -1.0, -1.0])
+
+
+def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
+    """Pinhole matrix K for square pixels and a centred principal point.
+
+    Args:
+        width: image width, pixels.
+        height: image height, pixels.
+        hfov_deg: horizontal field of view between the outer edges of the image, degrees.
+
+    Returns:
+        (3, 3) float64 K = [[f, 0, cx], [0, f, cy], [0, 0, 1]], cx = (width - 1)/2, cy = (height - 1)/2.
+    """
+    if not 0.0 < hfov_deg < 180.0:
+        raise ValueError(f"hfov_deg must be in (0, 180), got {hfov_deg}")
+    f = 0.5 * width / math.tan(math.radians(hfov_deg) / 2.0)
+    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def body_to_camera_rotation(uptilt_deg: float, roll_deg: float = 0.0) -> np.ndarray:
+    """Rotation of the camera mount.
+
+    Returns:
+        (3, 3) R_body_cam: columns are the optical axes (x right, y down, z forward) in the body frame.
+    """
+    a = math.radians(uptilt_deg)
+    # Pitch up = rotation by -uptilt about body y (a positive rotation about y tips x down).
+    pitch_up = np.array([[math.cos(a), 0.0, -math.sin(a)], [0.0, 1.0, 0.0], [math.sin(a), 0.0, math.cos(a)]])
+    r = math.radians(roll_deg)
+    roll = np.array([[math.cos(r), -math.sin(r), 0.0], [math.sin(r), math.cos(r), 0.0], [0.0, 0.0, 1.0]])
+    return pitch_up @ _R_BODY_OPTICAL @ roll
+
+
+def camera_poses(
+    pos: np.ndarray, quat: np.ndarray, r_body_cam: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World pose of the camera for N body poses (camera at the centre of mass).
+
+    Args:
+        pos: (N, 3) body positions, world frame, m.
+        quat: (N, 4) body attitudes x, y, z, w (body -> world).
+        r_body_cam: (3, 3) mount rotation from :func:`body_to_camera_rotation`.
+
+    Returns:
+        r_world_cam: (N, 3, 3), columns are the optical axes in the world frame.
+        t_world_cam: (N, 3) camera centre in the world frame.
+    """
+    pos = np.asarray(pos, dtype=float).reshape(-1, 3)
+    quat = np.asarray(quat, dtype=float).reshape(-1, 4)
+    quat = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    return quat_to_rot(quat) @ r_body_cam, pos.copy()
+
+
+def world_to_camera(points: np.ndarray, r_world_cam: np.ndarray, t_world_cam: np.ndarray) -> np.ndarray:
+    """Express world points in the camera (optical) frame.
+
+    Args:
+        points: (..., M, 3) world points; leading dims broadcast against the pose's.
+        r_world_cam: (..., 3, 3) camera rotation.
+        t_world_cam: (..., 3) camera centre.
+
+    Returns:
+        (..., M, 3) points in the optical frame, m (z is the depth along the optical axis).
+    """
+    t = np.asarray(t_world_cam, dtype=float)[..., None, :]
+    return (np.asarray(points, dtype=float) - t) @ np.asarray(r_world_cam, dtype=float)
+
+
+def camera_to_world(points_cam: np.ndarray, r_world_cam: np.ndarray, t_world_cam: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`world_to_camera`; shapes as there."""
+    r = np.asarray(r_world_cam, dtype=float)
+    return np.asarray(points_cam, dtype=float) @ np.swapaxes(r, -1, -2) + np.asarray(t_world_cam)[..., None, :]
+
+
+def project_points(k: np.ndarray, points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole projection of camera-frame points.
+
+    Args:
+        k: (3, 3) intrinsics.
+        points_cam: (..., 3) points in the optical frame.
+
+    Returns:
+        pixels: (..., 2) float64 (u, v); NaN for points at or behind the camera centre (z <= 0).
+        depth: (..., ) float64 z along the optical axis, m.
+    """
+    p = np.asarray(points_cam, dtype=float)
+    z = p[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        safe = np.where(z > 0, z, np.nan)
+        u = k[0, 0] * p[..., 0] / safe + k[0, 1] * p[..., 1] / safe + k[0, 2]
+        v = k[1, 1] * p[..., 1] / safe + k[1, 2]
+    return np.stack([u, v], axis=-1), z
+
+
+def unproject_pixels(k: np.ndarray, pixels: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Back-project pixels with known depth into the optical frame.
+
+    Args:
+        k: (3, 3) intrinsics (zero skew).
+        pixels: (..., 2) (u, v).
+        depth: (...,) z along the optical axis, m.
+
+    Returns:
+        (..., 3) points in the optical frame.
+    """
+    pix = np.asarray(pixels, dtype=float)
+    z = np.asarray(depth, dtype=float)
+    x = (pix[..., 0] - k[0, 2]) / k[0, 0] * z
+    y = (pix[..., 1] - k[1, 2]) / k[1, 1] * z
+    return np.stack([x, y, z], axis=-1)
+
+
+def gl_projection_matrix(k: np.ndarray, width: int, height: int, near: float, far: float) -> np.ndarray:
+    """OpenGL projection matrix that rasterises exactly like K (pixel centres at integer (u, v)).
+
+    Returns:
+        (4, 4) row-major matrix mapping OpenGL eye coordinates to clip coordinates.
+    """
+    fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
+    m = np.zeros((4, 4))
+    m[0, 0] = 2.0 * fx / width
+    m[0, 1] = -2.0 * k[0, 1] / width
+    m[0, 2] = (width - 2.0 * cx - 1.0) / width
+    m[1, 1] = 2.0 * fy / height
+    m[1, 2] = (2.0 * cy + 1.0 - height) / height
+    m[2, 2] = -(far + near) / (far - near)
+    m[2, 3] = -2.0 * far * near / (far - near)
+    m[3, 2] = -1.0
+    return m
+
+
+def gl_view_matrix(r_world_cam: np.ndarray, t_world_cam: np.ndarray) -> np.ndarray:
+    """OpenGL view matrix (world -> eye, row-major (4, 4)) of one camera pose."""
+    r_gl = np.asarray(r_world_cam, dtype=float) @ _CV_TO_GL
+    m = np.eye(4)
+    m[:3, :3] = r_gl.T
+    m[:3, 3] = -r_gl.T @ np.asarray(t_world_cam, dtype=float)
+    return m
+
+
+def depth_buffer_to_z(buffer: np.ndarray, near: float, far: float) -> np.ndarray:
+    """PyBullet's non-linear depth buffer in [0, 1] -> metric depth z along the optical axis."""
+    b = np.asarray(buffer, dtype=np.float64)
+    return far * near / (far - (far - near) * b)
+
+
+@dataclass(frozen=True)
+class Camera:
+    """An FPV camera rigidly mounted at the drone's centre of mass.
+
+    The one object used to render, label and solve PnP: K, the extrinsics and the PyBullet matrices
+    all derive from these fields.
+    """
+
+    width: int = 320
+    """Image width, pixels."""
+    height: int = 240
+    """Image height, pixels."""
+    hfov_deg: float = 90.0
+    """Horizontal field of view, degrees."""
+    uptilt_deg: float = 20.0
+    """Camera pitched up from the body x axis, degrees."""
+    roll_deg: float = 0.0
+    """Mount roll about the optical axis, degrees (0 for a level mount; jittered for data)."""
+    near: float = 0.05
+    """Near clipping distance, m."""
+    far: float = 200.0
+    """Far clipping distance, m."""
+
+    def __post_init__(self) -> None:
+        if self.width < 8 or self.height < 8:
+            raise ValueError(f"camera resolution too small: {self.width}x{self.height}")
+        if not 0.0 < self.hfov_deg < 170.0:
+            raise ValueError(f"hfov_deg must be in (0, 170), got {self.hfov_deg}")
+        if not 0.0 < self.near < self.far:
+            raise ValueError(f"need 0 < near < far, got near={self.near}, far={self.far}")
+
+    @classmethod
+    def from_params(cls, params: CameraParams, **overrides: float) -> Camera:
+        """The camera of a quadrotor file (``QuadParams.camera``), with optional field overrides."""
+        kw = dict(width=params.width, height=params.height, hfov_deg=params.hfov_deg)
+        kw["uptilt_deg"] = params.uptilt_deg
+        kw.update(overrides)
+        return cls(**kw)
+
+    @property
+    def K(self) -> np.ndarray:  # noqa: N802 - the usual name of the intrinsic matrix
+        """(3, 3) intrinsics."""
+        return intrinsics(self.width, self.height, self.hfov_deg)
+
+    @property
+    def vfov_deg(self) -> float:
+        """Vertical field of view between the outer image edges, degrees."""
+        return math.degrees(2.0 * math.atan(0.5 * self.height / self.K[1, 1]))
+
+    @property
+    def r_body_cam(self) -> np.ndarray:
+        """(3, 3) mount rotation; columns are the optical axes in the body frame."""
+        return body_to_camera_rotation(self.uptilt_deg, self.roll_deg)
+
+    def pose(self, pos: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Camera pose in the world for one body pose: (R_world_cam (3, 3), t_world_cam (3,))."""
+        r, t = camera_poses(pos, quat, self.r_body_cam)
+        return r[0], t[0]
+
+    def to_camera(self, points_world: np.ndarray, pos: np.ndarray, quat: np.ndarray) -> np.ndarray:
+        """(..., 3) world points -> (..., 3) optical-frame points, for one body pose."""
+        r, t = self.pose(pos, quat)
+        pts = np.asarray(points_world, dtype=float)
+        return world_to_camera(pts.reshape(-1, 3), r, t).reshape(pts.shape)
+
+    def project(
+        self, points_world: np.ndarray, pos: np.ndarray, quat: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points seen from one body pose.
+
+        Args:
+            points_world: (..., 3) world points.
+            pos: (3,) body position; quat: (4,) body attitude x, y, z, w.
+
+        Returns:
+            pixels: (..., 2) (u, v), NaN behind the camera; depth: (...,) z in the optical frame.
+        """
+        return project_points(self.K, self.to_camera(points_world, pos, quat))
+
+    def in_image(self, pixels: np.ndarray) -> np.ndarray:
+        """(..., 2) pixels -> (...,) bool, True inside the image area (NaN counts as outside)."""
+        u, v = pixels[..., 0], pixels[..., 1]
+        with np.errstate(invalid="ignore"):
+            return (u >= -0.5) & (u < self.width - 0.5) & (v >= -0.5) & (v < self.height - 0.5)
+
+    def view_matrix(self, pos: np.ndarray, quat: np.ndarray) -> list[float]:
+        """PyBullet ``viewMatrix`` (16 floats, column-major) for one body pose."""
+        return gl_view_matrix(*self.pose(pos, quat)).flatten(order="F").tolist()
+
+    def projection_matrix(self) -> list[float]:
+        """PyBullet ``projectionMatrix`` (16 floats, column-major) matching K."""
+        m = gl_projection_matrix(self.K, self.width, self.height, self.near, self.far)
+        return m.flatten(order="F").tolist()
+
+    def depth_to_z(self, buffer: np.ndarray) -> np.ndarray:
+        """Rendered depth buffer (H, W) in [0, 1] -> metric z along the optical axis (H, W)."""
+        return depth_buffer_to_z(buffer, self.near, self.far)

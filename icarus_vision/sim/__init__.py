@@ -1,0 +1,1 @@
+"""Simulation core: tracks, quadrotor dynamics, race rules, and the DroneRacingEnv backends."""

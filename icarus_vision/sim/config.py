@@ -1,0 +1,94 @@
+"""Configuration dataclasses of the racing environment (frozen; TOML or code builds them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from icarus_vision.sim.quad import QuadParams
+from icarus_vision.sim.track import Track
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights of the named reward terms (see ``sim/reward.py``)."""
+
+    progress: float = 1.0
+    """Per metre of distance gained toward the next gate (previous − current distance)."""
+    gate: float = 100.0
+    """Per gate passed."""
+    crash: float = -10.0
+    """Once, on a crash."""
+    attitude: float = -0.01
+    """Per radian of |roll| + |pitch|, every step."""
+    speed: float = 0.0
+    """Per m/s of velocity toward the next gate, every step (0 in the progress preset)."""
+    time: float = 0.0
+    """Per second of flight (a negative value is a time penalty; 0 in the progress preset)."""
+
+
+@dataclass(frozen=True)
+class RandomizationConfig:
+    """Domain randomisation applied at every reset when ``enabled`` (off by default)."""
+
+    enabled: bool = False
+    """Master switch."""
+    mass_pct: float = 0.2
+    """Mass scale drawn uniformly in [1 − p, 1 + p]."""
+    thrust_pct: float = 0.1
+    """Maximum-thrust scale drawn uniformly in [1 − p, 1 + p]."""
+    wind_mps: float = 2.0
+    """Constant wind: horizontal air velocity of uniform random direction, speed in [0, wind_mps]."""
+    gust_mps: float = 1.0
+    """Gust amplitude per axis (sum of three random sinusoids, 0.1–1 Hz), m/s."""
+    gate_pos_jitter_m: float = 0.3
+    """Each gate centre moved uniformly within ± this per axis (z kept ≥ 0.8 m)."""
+    gate_yaw_jitter_deg: float = 10.0
+    """Each gate heading turned uniformly within ± this."""
+    start_pos_jitter_m: float = 0.0
+    """Start position moved horizontally within ± this."""
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Everything a DroneRacingEnv needs; the same config drives both backends."""
+
+    track: Track | None = None
+    """Fixed track (None: the default built-in track). Ignored when ``random_tracks``."""
+    random_tracks: bool = False
+    """Draw a new procedural track (``random_track``) for every episode."""
+    num_gates: int | None = None
+    """Gates per episode: the first n of a fixed track, or n random gates (None: all / 10)."""
+    quad: QuadParams = field(default_factory=QuadParams)
+    """The quadrotor."""
+    ctrl_hz: float = 50.0
+    """Control (action) rate, Hz."""
+    physics_hz: float = 250.0
+    """Physics rate, Hz; must be an integer multiple of ``ctrl_hz``."""
+    max_episode_s: float | None = None
+    """Time limit (truncation); None: 5 s + 3 s per gate passage."""
+    gate_obs_frame: str = "world"
+    """Frame of obs[12:15], the next gate's relative position: "world" or "body"."""
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    """Reward weights."""
+    randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
+    """Domain randomisation."""
+
+    def __post_init__(self) -> None:
+        ratio = self.physics_hz / self.ctrl_hz
+        if self.ctrl_hz <= 0 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(
+                f"physics_hz ({self.physics_hz}) must be a positive integer multiple of ctrl_hz ({self.ctrl_hz})"
+            )
+        if self.gate_obs_frame not in ("world", "body"):
+            raise ValueError(f"gate_obs_frame must be 'world' or 'body', got {self.gate_obs_frame!r}")
+        if self.num_gates is not None and self.num_gates < 1:
+            raise ValueError(f"num_gates must be >= 1, got {self.num_gates}")
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.physics_hz / self.ctrl_hz))
+
+    @property
+    def dt(self) -> float:
+        """Control period, s."""
+        return 1.0 / self.ctrl_hz

@@ -1,0 +1,327 @@
+"""Backend-independent race logic for N drones: episodes, randomisation, rules, reward, observation.
+
+A backend only integrates the physics and reports collisions; everything a race *means* lives here,
+once, so the batched numpy backend and the PyBullet backend cannot disagree on it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from icarus_vision.sim import rules
+from icarus_vision.sim.builtin import resolve_track
+from icarus_vision.sim.config import EnvConfig
+from icarus_vision.sim.dynamics import QuadBatchParams, QuadState, quat_to_rot, quat_to_rpy, rpy_to_quat
+from icarus_vision.sim.random_track import random_track
+from icarus_vision.sim.reward import compute_reward
+from icarus_vision.sim.track import SAME_GATE_TOL, Gate, Track
+
+OBS_DIM = 15
+TAKEOFF_CLEARANCE = 0.1  # m above the ground (sphere bottom) that counts as airborne
+RANDOM_TRACK_GATES = 10
+GUST_FREQ_HZ = (0.1, 1.0)
+
+
+def validate_action(action, n: int) -> np.ndarray:
+    """Check and clip actions.
+
+    Args:
+        action: array-like (n, 4) (or (4,) when n == 1) in [-1, 1].
+
+    Returns:
+        (n, 4) float64 clipped to [-1, 1].
+
+    Raises:
+        ValueError: wrong shape, or NaN / inf entries.
+    """
+    a = np.asarray(action, dtype=np.float64)
+    if n == 1 and a.shape == (4,):
+        a = a[None]
+    if a.shape != (n, 4):
+        want = "(4,)" if n == 1 else f"({n}, 4)"
+        raise ValueError(f"action must have shape {want} [thrust, roll_rate, pitch_rate, yaw_rate], got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action contains NaN or inf: {a[~np.isfinite(a).all(axis=1)][0].tolist()}")
+    return np.clip(a, -1.0, 1.0)
+
+
+def jitter_track(track: Track, rng: np.random.Generator, pos_m: float, yaw_deg: float) -> Track:
+    """Move each physical gate by a random offset (a gate flown twice moves once)."""
+    phys: list[tuple[np.ndarray, np.ndarray, float]] = []
+    gates = []
+    for g in track.gates:
+        p = np.array(g.pos)
+        for q, dp, dyaw in phys:
+            if np.linalg.norm(p - q) < SAME_GATE_TOL:
+                break
+        else:
+            dp, dyaw = rng.uniform(-pos_m, pos_m, 3), rng.uniform(-yaw_deg, yaw_deg)
+            phys.append((p, dp, dyaw))
+        new = p + dp
+        new[2] = max(new[2], 0.8)
+        gates.append(replace(g, pos=tuple(float(v) for v in new), yaw_deg=g.yaw_deg + dyaw))
+    return replace(track, gates=tuple(gates), bounds_min=None, bounds_max=None)
+
+
+class RaceCore:
+    """Race bookkeeping for N drones. Backends call ``reset_drones``, ``wind``, ``finish_step``.
+
+    Per-drone randomness comes from per-drone generators, so drone i of a batch seeded with s
+    behaves exactly as a single-drone env seeded with s + i.
+    """
+
+    def __init__(self, cfg: EnvConfig, n: int) -> None:
+        self.cfg = cfg
+        self.n = n
+        self.base_track = None if cfg.random_tracks else resolve_track(cfg.track)
+        self.num_gates = cfg.num_gates
+        self.rngs = [np.random.default_rng() for _ in range(n)]
+        self.tracks: list[Track] = [None] * n  # type: ignore[list-item]
+        self.params = QuadBatchParams.from_quad(cfg.quad, n)
+        self._alloc(self._capacity())
+        self.target = np.zeros(n, dtype=np.int64)
+        self.t = np.zeros(n)
+        self.max_t = np.zeros(n)
+        self.taken_off = np.zeros(n, dtype=bool)
+        self.lap_start = np.zeros(n)
+        self.last_lap_time = np.full(n, np.nan)
+        self.gates_per_lap = np.ones(n, dtype=np.int64)
+        self.wind_const = np.zeros((n, 3))
+        self.gust_amp = np.zeros((n, 3, 3))
+        self.gust_freq = np.zeros((n, 3, 3))
+        self.gust_phase = np.zeros((n, 3, 3))
+        self.ep_return = np.zeros(n)
+        self.ep_len = np.zeros(n, dtype=np.int64)
+        self.lap_times: list[list[float]] = [[] for _ in range(n)]
+
+    # -- track arrays ------------------------------------------------------------------------
+    def _capacity(self) -> int:
+        if self.base_track is None:
+            return self.num_gates or RANDOM_TRACK_GATES
+        return self.base_track.num_passages
+
+    def _alloc(self, cap: int) -> None:
+        n = self.n
+        self.cap = cap
+        self.g_pos = np.zeros((n, cap, 3))
+        self.g_pos[:, :, 2] = -1e3  # padding far below the world
+        self.g_yaw = np.zeros((n, cap))
+        self.g_reach = np.zeros((n, cap))  # centre-to-outer-corner distance of each gate
+        self.g_cos = np.ones((n, cap))
+        self.g_sin = np.zeros((n, cap))
+        self.g_size = np.ones((n, cap))
+        self.g_fw = np.full((n, cap), 0.1)
+        self.g_mask = np.zeros((n, cap), dtype=bool)
+        self.n_pass = np.ones(n, dtype=np.int64)
+        self.bounds_lo = np.zeros((n, 3))
+        self.bounds_hi = np.zeros((n, 3))
+
+    def set_num_gates(self, n_gates: int) -> None:
+        """Gates per episode from the next reset on (curriculum hook)."""
+        if n_gates < 1:
+            raise ValueError(f"num gates must be >= 1, got {n_gates}")
+        if self.base_track is not None and n_gates > len(self.base_track.gates):
+            n_gates = len(self.base_track.gates)
+        self.num_gates = int(n_gates)
+        need = n_gates if self.base_track is None else n_gates * self.base_track.laps
+        if need > self.cap:
+            names = ("g_pos", "g_yaw", "g_reach", "g_cos", "g_sin", "g_size", "g_fw", "g_mask")
+            old = {k: getattr(self, k) for k in (*names, "n_pass", "bounds_lo", "bounds_hi")}
+            c = self.cap
+            self._alloc(need)
+            for k in names:
+                getattr(self, k)[:, :c] = old[k]
+            for k in ("n_pass", "bounds_lo", "bounds_hi"):
+                setattr(self, k, old[k])
+
+    def _episode_track(self, rng: np.random.Generator) -> Track:
+        if self.base_track is None:
+            track = random_track(self.num_gates or RANDOM_TRACK_GATES, rng)
+        else:
+            track = self.base_track
+            if self.num_gates is not None and self.num_gates < len(track.gates):
+                track = replace(track, gates=track.gates[: self.num_gates], laps=1, bounds_min=None, bounds_max=None)
+        r = self.cfg.randomization
+        if r.enabled and (r.gate_pos_jitter_m > 0 or r.gate_yaw_jitter_deg > 0):
+            track = jitter_track(track, rng, r.gate_pos_jitter_m, r.gate_yaw_jitter_deg)
+        return track
+
+    # -- episodes ----------------------------------------------------------------------------
+    def seed(self, seeds: list[int | None]) -> None:
+        for i, s in enumerate(seeds):
+            if s is not None:
+                self.rngs[i] = np.random.default_rng(s)
+
+    def reset_drones(self, idx: np.ndarray) -> QuadState:
+        """Start new episodes for drones ``idx``; returns their initial states."""
+        cfg, r = self.cfg, self.cfg.randomization
+        state = QuadState.zeros(len(idx))
+        start_yaw = np.zeros(len(idx))
+        for k, i in enumerate(idx):
+            rng = self.rngs[i]
+            track = self._episode_track(rng)
+            self.tracks[i] = track
+            passages = track.passages
+            m = len(passages)
+            self.g_mask[i] = False
+            self.g_mask[i, :m] = True
+            self.g_pos[i, :m] = [g.pos for g in passages]
+            self.g_yaw[i, :m] = [g.yaw for g in passages]
+            self.g_cos[i], self.g_sin[i] = np.cos(self.g_yaw[i]), np.sin(self.g_yaw[i])
+            self.g_size[i, :m] = [g.size for g in passages]
+            self.g_fw[i, :m] = [g.frame_width for g in passages]
+            self.g_reach[i] = np.sqrt(2.0) * (self.g_size[i] / 2 + self.g_fw[i]) + self.g_fw[i]
+            self.n_pass[i] = m
+            self.gates_per_lap[i] = len(track.gates)
+            self.bounds_lo[i], self.bounds_hi[i] = track.bounds_min, track.bounds_max
+            mass, thrust_max = cfg.quad.mass, cfg.quad.thrust_max
+            self.wind_const[i] = 0.0
+            self.gust_amp[i] = 0.0
+            start = np.array(track.start_pos, float)
+            if r.enabled:
+                mass *= rng.uniform(1 - r.mass_pct, 1 + r.mass_pct)
+                thrust_max *= rng.uniform(1 - r.thrust_pct, 1 + r.thrust_pct)
+                ang = rng.uniform(0, 2 * math.pi)
+                self.wind_const[i] = rng.uniform(0, r.wind_mps) * np.array([math.cos(ang), math.sin(ang), 0.0])
+                self.gust_amp[i] = rng.uniform(0, r.gust_mps, (3, 3)) / 3.0
+                self.gust_freq[i] = rng.uniform(*GUST_FREQ_HZ, (3, 3))
+                self.gust_phase[i] = rng.uniform(0, 2 * math.pi, (3, 3))
+                if r.start_pos_jitter_m > 0:
+                    start[:2] += rng.uniform(-r.start_pos_jitter_m, r.start_pos_jitter_m, 2)
+            self.params.mass[i], self.params.thrust_max[i] = mass, thrust_max
+            state.pos[k] = start
+            start_yaw[k] = math.radians(track.start_yaw_deg)
+            self.max_t[i] = cfg.max_episode_s if cfg.max_episode_s is not None else 5.0 + 3.0 * m
+            self.lap_times[i] = []
+        state.quat[:] = rpy_to_quat(np.stack((0 * start_yaw, 0 * start_yaw, start_yaw), axis=1))
+        self.target[idx] = 0
+        self.t[idx] = 0.0
+        self.taken_off[idx] = False
+        self.lap_start[idx] = 0.0
+        self.last_lap_time[idx] = np.nan
+        self.ep_return[idx] = 0.0
+        self.ep_len[idx] = 0
+        return state
+
+    def wind(self) -> np.ndarray:
+        """(N, 3) world air velocity at the current time of each drone, m/s."""
+        t = self.t[:, None, None]
+        gust = (self.gust_amp * np.sin(2 * math.pi * self.gust_freq * t + self.gust_phase)).sum(axis=1)
+        return self.wind_const + gust
+
+    def target_gate(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Target passage of each drone (the last one once all are passed): pos (N, 3), yaw (N,), size (N,)."""
+        j = np.minimum(self.target, self.n_pass - 1)
+        rows = np.arange(self.n)
+        return self.g_pos[rows, j], self.g_yaw[rows, j], self.g_size[rows, j]
+
+    # -- rules -------------------------------------------------------------------------------
+    def frame_collision(self, trail: np.ndarray) -> np.ndarray:
+        """(N,) bool: any sub-step position (trail (S, N, 3)) within the drone radius of a bar.
+
+        A broad phase keeps only (drone, gate) pairs whose centres are within reach of each other
+        at the end of the step; the exact bar distance is computed for those pairs alone.
+        """
+        end = trail[-1]
+        diff = self.g_pos - end[:, None, :]
+        travel = np.abs(trail[-1] - trail[0]).sum(axis=1)
+        reach = self.g_reach + (self.params.radius + travel)[:, None]
+        near = (np.einsum("ngi,ngi->ng", diff, diff) < reach * reach) & self.g_mask
+        ni, gi = np.nonzero(near)
+        hit = np.zeros(self.n, dtype=bool)
+        if ni.size == 0:
+            return hit
+        d = trail[:, ni, :] - self.g_pos[ni, gi]
+        c, s = self.g_cos[ni, gi], self.g_sin[ni, gi]
+        local = np.stack((c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]), axis=-1)
+        dist_sq = rules.bar_distance_sq_local(local, self.g_size[ni, gi], self.g_fw[ni, gi])
+        hit[ni[(dist_sq < self.params.radius**2).any(axis=0)]] = True
+        return hit
+
+    def finish_step(
+        self,
+        p0: np.ndarray,
+        state: QuadState,
+        frame_hit: np.ndarray,
+        ground_hit: np.ndarray,
+        trail: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Apply the rules after the physics of one control step.
+
+        Args:
+            p0: (N, 3) positions before the step.
+            state: states after the step.
+            frame_hit, ground_hit: (N,) bool collisions reported by the backend.
+            trail: (S, N, 3) sub-step positions for the bounds check (None: end position only).
+
+        Returns:
+            reward (N,), terminated (N,), truncated (N,), crash_code (N,) int (-1 none, else index in
+            rules.CRASH_REASONS), and the named reward terms.
+        """
+        cfg = self.cfg
+        dt = cfg.dt
+        gpos, gyaw, gsize = self.target_gate()
+        active = self.target < self.n_pass
+        prev_dist = np.linalg.norm(gpos - p0, axis=1)
+        to_gate = gpos - state.pos
+        dist = np.linalg.norm(to_gate, axis=1)
+        passed = rules.gate_passage(p0, state.pos, gpos, gyaw, gsize) & active
+        pts = trail if trail is not None else state.pos[None]
+        oob = rules.out_of_bounds(pts, self.bounds_lo, self.bounds_hi).any(axis=0)
+        ground = ground_hit & self.taken_off
+        crash_code = np.where(frame_hit, 0, np.where(ground, 1, np.where(oob, 2, -1)))
+        crashed = crash_code >= 0
+        self.taken_off |= state.pos[:, 2] >= self.params.radius + TAKEOFF_CLEARANCE
+        rpy = quat_to_rpy(state.quat)
+        reward, terms = compute_reward(
+            cfg.reward, prev_dist=prev_dist, dist=dist, passed=passed, crashed=crashed,
+            rpy=rpy, vel=state.vel, to_gate=to_gate, dt=dt,
+        )  # fmt: skip
+        self.t += dt
+        self.target += passed
+        lap_done = passed & (self.target % self.gates_per_lap == 0)
+        if lap_done.any():
+            for i in np.flatnonzero(lap_done):
+                lap = float(self.t[i] - self.lap_start[i])
+                self.lap_times[i].append(lap)
+                self.last_lap_time[i] = lap
+                self.lap_start[i] = self.t[i]
+        all_passed = self.target >= self.n_pass
+        terminated = crashed | all_passed
+        truncated = (self.t >= self.max_t - 1e-9) & ~terminated
+        self.ep_return += reward
+        self.ep_len += 1
+        return reward, terminated, truncated, crash_code, terms
+
+    def observe(self, state: QuadState) -> np.ndarray:
+        """(N, 15) float32: pos, vel, rpy, body rates, next gate relative position (world or body)."""
+        gpos, _, _ = self.target_gate()
+        rel = gpos - state.pos
+        if self.cfg.gate_obs_frame == "body":
+            rel = np.einsum("nji,nj->ni", quat_to_rot(state.quat), rel)
+        return np.concatenate((state.pos, state.vel, quat_to_rpy(state.quat), state.omega, rel), axis=1).astype(np.float32)
+
+    def info(self, i: int, terms: dict, crash_code: int) -> dict:
+        """The info dict of drone ``i`` for the step just taken."""
+        return {
+            "gates_passed": int(self.target[i]),
+            "gates_total": int(self.n_pass[i]),
+            "all_gates_passed": bool(self.target[i] >= self.n_pass[i]),
+            "crashed": bool(crash_code >= 0),
+            "crash_reason": rules.CRASH_REASONS[crash_code] if crash_code >= 0 else None,
+            "lap_time": None if np.isnan(self.last_lap_time[i]) else float(self.last_lap_time[i]),
+            "lap_times": list(self.lap_times[i]),
+            "time": float(self.t[i]),
+            "reward_terms": {k: float(v[i]) for k, v in terms.items()},
+        }
+
+
+def track_of(core: RaceCore, i: int) -> Track:
+    """The track drone ``i`` is flying this episode."""
+    return core.tracks[i]
+
+
+__all__ = ["OBS_DIM", "RaceCore", "validate_action", "jitter_track", "Gate", "track_of"]
