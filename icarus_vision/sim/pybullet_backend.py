@@ -8,7 +8,7 @@ thrust, drag and rate-controller torque come from ``dynamics.body_wrench`` and t
 from __future__ import annotations
 
 import numpy as np
-import pybullet as p
+from icarus_vision.sim.bullet import p
 
 from icarus_vision.sim import dynamics
 from icarus_vision.sim.dynamics import QuadState

@@ -1,0 +1,1 @@
+"""Closed-loop races: runner, report, plots."""
