@@ -109,7 +109,11 @@ class PyBulletDroneRacingEnv(DroneRacingEnv):
         if self._world_track is None or self._world_track != track:
             self._build(track)
         c = self.client
-        p.changeDynamics(self.drone, -1, mass=float(self.core.params.mass[0]), physicsClientId=c)
+        # Setting the mass makes Bullet recompute the inertia from the sphere: set both together.
+        p.changeDynamics(
+            self.drone, -1, mass=float(self.core.params.mass[0]),
+            localInertiaDiagonal=list(self.config.quad.inertia), physicsClientId=c,
+        )  # fmt: skip
         p.resetBasePositionAndOrientation(self.drone, state.pos[0].tolist(), state.quat[0].tolist(), physicsClientId=c)
         rot = dynamics.quat_to_rot(state.quat)[0]
         p.resetBaseVelocity(self.drone, state.vel[0].tolist(), (rot @ state.omega[0]).tolist(), physicsClientId=c)

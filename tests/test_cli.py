@@ -1,0 +1,57 @@
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from icarus_vision.cli import app
+
+runner = CliRunner()
+
+
+def test_help_on_every_command():
+    res = runner.invoke(app, ["--help"])
+    assert res.exit_code == 0
+    for cmd in ("tracks", "race"):
+        res = runner.invoke(app, [cmd, "--help"])
+        assert res.exit_code == 0 and "Usage" in res.output
+
+
+def test_tracks_lists_builtin_tracks():
+    res = runner.invoke(app, ["tracks"])
+    assert res.exit_code == 0
+    for name in ("single-gate", "ten-gates", "grand-prix"):
+        assert name in res.output
+
+
+def test_race_writes_report_and_plot(tmp_path):
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["race", "--track", "single-gate", "--backend", "batched", "--out", str(out), "--json", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.output
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["finished"] and report["track"] == "single-gate"
+    assert (out / "trajectory.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    "args, msg",
+    [
+        (["race", "--track", "nowhere"], "built-in tracks: single-gate"),
+        (["race", "--track", "missing.toml"], "missing.toml: track file not found"),
+        (["race", "--backend", "mujoco"], "unknown backend"),
+        (["race", "--quad", "nope.toml"], "nope.toml: quadrotor file not found"),
+    ],
+)
+def test_race_bad_input_is_one_line_error(args, msg, tmp_path):
+    res = runner.invoke(app, args)
+    assert res.exit_code == 1
+    assert msg in res.output
+    assert "Traceback" not in res.output
+
+
+def test_bad_track_file_names_file_and_gate(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nsize=0.0\n')
+    res = runner.invoke(app, ["race", "--track", str(p)])
+    assert res.exit_code == 1 and "bad.toml gate 0: size must be > 0" in res.output
