@@ -62,7 +62,7 @@ class EnvConfig:
     """The quadrotor."""
     ctrl_hz: float = 50.0
     """Control (action) rate, Hz."""
-    physics_hz: float = 250.0
+    physics_hz: float = 200.0
     """Physics rate, Hz; must be an integer multiple of ``ctrl_hz``."""
     max_episode_s: float | None = None
     """Time limit (truncation); None: 5 s + 3 s per gate passage."""

@@ -221,8 +221,11 @@ def body_wrench(
     wind: np.ndarray,
     params: QuadBatchParams,
     dt: float,
+    rot: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Forces and torques one physics sub-step applies, for a backend that integrates itself.
+
+    ``rot`` (N, 3, 3) may be passed when the caller already has the attitude as a matrix.
 
     Returns:
         thrust_next: (N,) thrust after the lag update, N.
@@ -231,7 +234,7 @@ def body_wrench(
     """
     k = lag_gain(dt, params.motor_tau)
     thrust = state.thrust + (thrust_cmd - state.thrust) * k
-    rot = quat_to_rot(state.quat)
+    rot = quat_to_rot(state.quat) if rot is None else rot
     force = rot[:, :, 2] * thrust[:, None] + drag_force(rot, state.vel, wind, params.drag)
     j = params.inertia
     jw = state.omega * j

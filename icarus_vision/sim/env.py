@@ -97,7 +97,7 @@ class DroneRacingEnv(gym.Env):
         reward, term, trunc, crash, terms = self.core.finish_step(p0, self.state, frame_hit, ground_hit, trail)
         info = self.core.info(0, terms, int(crash[0]))
         self._needs_reset = bool(term[0] or trunc[0])
-        obs = self.core.observe(self.state)[0]
+        obs = self.core.observe(self.state, self.core.last_rpy)[0]
         return obs, float(reward[0]), bool(term[0]), bool(trunc[0]), info
 
     # -- extras ------------------------------------------------------------------------------

@@ -115,15 +115,16 @@ class PyBulletDroneRacingEnv(DroneRacingEnv):
             localInertiaDiagonal=list(self.config.quad.inertia), physicsClientId=c,
         )  # fmt: skip
         p.resetBasePositionAndOrientation(self.drone, state.pos[0].tolist(), state.quat[0].tolist(), physicsClientId=c)
-        rot = dynamics.quat_to_rot(state.quat)[0]
-        p.resetBaseVelocity(self.drone, state.vel[0].tolist(), (rot @ state.omega[0]).tolist(), physicsClientId=c)
+        self._rot = dynamics.quat_to_rot(state.quat)
+        p.resetBaseVelocity(self.drone, state.vel[0].tolist(), (self._rot[0] @ state.omega[0]).tolist(), physicsClientId=c)
 
     def _read_state(self) -> None:
         c, s = self.client, self.state
         pos, orn = p.getBasePositionAndOrientation(self.drone, physicsClientId=c)
         lin, ang = p.getBaseVelocity(self.drone, physicsClientId=c)
         s.pos[0], s.quat[0], s.vel[0] = pos, orn, lin
-        s.omega[0] = dynamics.quat_to_rot(s.quat)[0].T @ np.asarray(ang)
+        self._rot = dynamics.quat_to_rot(s.quat)
+        s.omega[0] = self._rot[0].T @ np.asarray(ang)
 
     def _backend_step(self, thrust_cmd, rate_cmd, wind):
         c, cfg, params = self.client, self.config, self.core.params
@@ -132,7 +133,7 @@ class PyBulletDroneRacingEnv(DroneRacingEnv):
         frame_hit = ground_hit = False
         gates = set(self.gate_ids)
         for k in range(cfg.substeps):
-            thrust, force, torque = dynamics.body_wrench(self.state, thrust_cmd, rate_cmd, wind, params, dt)
+            thrust, force, torque = dynamics.body_wrench(self.state, thrust_cmd, rate_cmd, wind, params, dt, self._rot)
             self.state.thrust[:] = thrust
             p.applyExternalForce(self.drone, -1, force[0].tolist(), self.state.pos[0].tolist(), p.WORLD_FRAME, physicsClientId=c)
             p.applyExternalTorque(self.drone, -1, torque[0].tolist(), p.WORLD_FRAME, physicsClientId=c)

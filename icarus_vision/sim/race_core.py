@@ -275,7 +275,7 @@ class RaceCore:
         crash_code = np.where(frame_hit, 0, np.where(ground, 1, np.where(oob, 2, -1)))
         crashed = crash_code >= 0
         self.taken_off |= state.pos[:, 2] >= self.params.radius + TAKEOFF_CLEARANCE
-        rpy = quat_to_rpy(state.quat)
+        rpy = self.last_rpy = quat_to_rpy(state.quat)
         reward, terms = compute_reward(
             cfg.reward, prev_dist=prev_dist, dist=dist, passed=passed, crashed=crashed,
             rpy=rpy, vel=state.vel, to_gate=to_gate, dt=dt,
@@ -296,13 +296,17 @@ class RaceCore:
         self.ep_len += 1
         return reward, terminated, truncated, crash_code, terms
 
-    def observe(self, state: QuadState) -> np.ndarray:
-        """(N, 15) float32: pos, vel, rpy, body rates, next gate relative position (world or body)."""
+    def observe(self, state: QuadState, rpy: np.ndarray | None = None) -> np.ndarray:
+        """(N, 15) float32: pos, vel, rpy, body rates, next gate relative position (world or body).
+
+        ``rpy`` (N, 3) may be passed when already computed for this state.
+        """
+        rpy = quat_to_rpy(state.quat) if rpy is None else rpy
         gpos, _, _ = self.target_gate()
         rel = gpos - state.pos
         if self.cfg.gate_obs_frame == "body":
             rel = np.einsum("nji,nj->ni", quat_to_rot(state.quat), rel)
-        return np.concatenate((state.pos, state.vel, quat_to_rpy(state.quat), state.omega, rel), axis=1).astype(np.float32)
+        return np.concatenate((state.pos, state.vel, rpy, state.omega, rel), axis=1).astype(np.float32)
 
     def info(self, i: int, terms: dict, crash_code: int) -> dict:
         """The info dict of drone ``i`` for the step just taken."""

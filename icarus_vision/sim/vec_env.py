@@ -72,7 +72,7 @@ class BatchedRacingVecEnv(VecEnv):
             infos = [core.info(i, terms, int(crash[i])) for i in range(self.num_envs)]
         else:
             infos = [{} for _ in range(self.num_envs)]
-        obs = core.observe(self.state)
+        obs = core.observe(self.state, core.last_rpy)
         if done.any():
             idx = np.flatnonzero(done)
             for i in idx:
