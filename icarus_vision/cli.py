@@ -33,7 +33,9 @@ def user_errors(fn):
         try:
             return fn(*args, **kwargs)
         except (ValueError, FileNotFoundError, RuntimeError) as e:
-            err_console.print(f"[bold red]error:[/] {e}", markup=True, highlight=False, soft_wrap=True)
+            err_console.print(
+                f"[bold red]error:[/] {e}", markup=True, highlight=False, soft_wrap=True
+            )
             raise typer.Exit(1) from None
         except KeyboardInterrupt:
             err_console.print("interrupted")
@@ -59,19 +61,25 @@ def tracks_cmd() -> None:
         length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
         z = pts[1:, 2]
         label = f"{name} (default)" if name == DEFAULT_TRACK else name
-        table.add_row(label, str(len(t.gates)), str(t.laps), f"{length:.1f}", f"{z.min():.1f}–{z.max():.1f}")
+        table.add_row(
+            label, str(len(t.gates)), str(t.laps), f"{length:.1f}", f"{z.min():.1f}–{z.max():.1f}"
+        )
     console.print(table)
 
 
 @app.command("race")
 @user_errors
 def race_cmd(
-    track: str = typer.Option(None, help="Built-in track name or a track TOML path (default: the default track)."),
+    track: str = typer.Option(
+        None, help="Built-in track name or a track TOML path (default: the default track)."
+    ),
     quad: Path = typer.Option(None, help="Quadrotor TOML file (default: the built-in racer-500g)."),
     laps: int = typer.Option(None, min=1, help="Laps to fly (default: the track's own)."),
     seed: int = typer.Option(0, help="Random seed."),
     backend: str = typer.Option("pybullet", help="Physics backend: pybullet or batched."),
-    randomize: bool = typer.Option(False, "--randomize/--no-randomize", help="Randomise mass, wind and gates."),
+    randomize: bool = typer.Option(
+        False, "--randomize/--no-randomize", help="Randomise mass, wind and gates."
+    ),
     json_path: Path = typer.Option(None, "--json", help="Also write the report to this JSON file."),
     out: Path = typer.Option(None, help="Output folder (default: runs/race-<timestamp>/)."),
 ) -> None:
@@ -87,7 +95,9 @@ def race_cmd(
     if backend not in ("pybullet", "batched"):
         raise ValueError(f"unknown backend {backend!r}; choose pybullet or batched")
     quad_params = load_quad(quad) if quad is not None else None
-    result = run_race(track, quad=quad_params, laps=laps, seed=seed, backend=backend, randomize=randomize)
+    result = run_race(
+        track, quad=quad_params, laps=laps, seed=seed, backend=backend, randomize=randomize
+    )
     out = out or Path("runs") / f"race-{datetime.now():%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
     r = result.report
@@ -95,7 +105,15 @@ def race_cmd(
     if json_path is not None:
         atomic_write_json(json_path, r)
     crash = result.pos[-1] if r["crashed"] else None
-    plot_trajectory(out / "trajectory.png", result.track, result.t, result.pos, result.speed, crash, title=f"{r['track']} ({r['policy']})")
+    plot_trajectory(
+        out / "trajectory.png",
+        result.track,
+        result.t,
+        result.pos,
+        result.speed,
+        crash,
+        title=f"{r['track']} ({r['policy']})",
+    )
     table = Table(title=f"race: {r['track']} · {r['policy']} · {r['backend']}")
     table.add_column("metric")
     table.add_column("value")

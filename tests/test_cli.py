@@ -27,7 +27,20 @@ def test_tracks_lists_builtin_tracks():
 
 def test_race_writes_report_and_plot(tmp_path):
     out = tmp_path / "run"
-    res = runner.invoke(app, ["race", "--track", "single-gate", "--backend", "batched", "--out", str(out), "--json", str(tmp_path / "r.json")])
+    res = runner.invoke(
+        app,
+        [
+            "race",
+            "--track",
+            "single-gate",
+            "--backend",
+            "batched",
+            "--out",
+            str(out),
+            "--json",
+            str(tmp_path / "r.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["finished"] and report["track"] == "single-gate"

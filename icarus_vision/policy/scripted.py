@@ -101,11 +101,20 @@ class ScriptedController:
 
     def act_env(self, env, obs: np.ndarray) -> np.ndarray:
         """Actions for a DroneRacingEnv or BatchedRacingVecEnv (reads each drone's next-gate heading)."""
-        _, yaw, _ = env.unwrapped.core.target_gate() if hasattr(env, "unwrapped") else env.core.target_gate()
+        _, yaw, _ = (
+            env.unwrapped.core.target_gate()
+            if hasattr(env, "unwrapped")
+            else env.core.target_gate()
+        )
         return self.act(obs, yaw)
 
 
-def fly(env, controller: ScriptedController | None = None, seed: int | None = None, max_steps: int = 100_000) -> dict:
+def fly(
+    env,
+    controller: ScriptedController | None = None,
+    seed: int | None = None,
+    max_steps: int = 100_000,
+) -> dict:
     """Fly one episode of a single-drone env with the scripted controller.
 
     Returns:
@@ -114,7 +123,7 @@ def fly(env, controller: ScriptedController | None = None, seed: int | None = No
     controller = controller or ScriptedController(env.unwrapped.config.quad)
     obs, info = env.reset(seed=seed)
     positions, speeds = [obs[:3].copy()], [0.0]
-    for step in range(max_steps):
+    for step in range(max_steps):  # noqa: B007 (step is used after the loop)
         obs, _, term, trunc, info = env.step(controller.act_env(env, obs[None])[0])
         positions.append(obs[:3].copy())
         speeds.append(float(np.linalg.norm(obs[3:6])))

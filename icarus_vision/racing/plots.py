@@ -25,7 +25,9 @@ def _coloured_line(ax, x, y, c, vmax):
     return lc
 
 
-def plot_trajectory(path: str | os.PathLike, track: Track, t, pos, speed, crash_point=None, title: str = "") -> None:
+def plot_trajectory(
+    path: str | os.PathLike, track: Track, t, pos, speed, crash_point=None, title: str = ""
+) -> None:
     """Write a PNG: top view (x, y) and altitude against time, path coloured by speed.
 
     Args:
@@ -34,14 +36,23 @@ def plot_trajectory(path: str | os.PathLike, track: Track, t, pos, speed, crash_
     """
     t, pos, speed = np.asarray(t), np.asarray(pos), np.asarray(speed)
     vmax = max(float(speed.max()), 1e-3)
-    fig, (ax_top, ax_alt) = plt.subplots(1, 2, figsize=(12, 5), gridspec_kw={"width_ratios": [1.3, 1]})
+    fig, (ax_top, ax_alt) = plt.subplots(
+        1, 2, figsize=(12, 5), gridspec_kw={"width_ratios": [1.3, 1]}
+    )
     lc = _coloured_line(ax_top, pos[:, 0], pos[:, 1], speed, vmax)
     for i, g in enumerate(track.gates):
         c = np.asarray(g.pos)
         half = g.size / 2 + g.frame_width
         d = np.array([-np.sin(g.yaw), np.cos(g.yaw)]) * half
-        ax_top.plot([c[0] - d[0], c[0] + d[0]], [c[1] - d[1], c[1] + d[1]], color="tab:orange", lw=4)
-        ax_top.annotate("", c[:2] + 0.8 * g.normal[:2], c[:2], arrowprops={"arrowstyle": "->", "color": "tab:orange"})
+        ax_top.plot(
+            [c[0] - d[0], c[0] + d[0]], [c[1] - d[1], c[1] + d[1]], color="tab:orange", lw=4
+        )
+        ax_top.annotate(
+            "",
+            c[:2] + 0.8 * g.normal[:2],
+            c[:2],
+            arrowprops={"arrowstyle": "->", "color": "tab:orange"},
+        )
         ax_top.text(c[0], c[1] + 0.4, str(i), fontsize=8, ha="center")
     ax_top.plot(*track.start_pos[:2], "k^", label="start")
     if crash_point is not None:

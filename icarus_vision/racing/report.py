@@ -14,7 +14,11 @@ PERCEPTION_FIELDS = ("frames", "detection_rate", "rel_gate_error_m")
 
 def empty_perception() -> dict:
     """Perception block for races flown without a camera (all figures null)."""
-    return {"frames": None, "detection_rate": None, "rel_gate_error_m": {"median": None, "p95": None}}
+    return {
+        "frames": None,
+        "detection_rate": None,
+        "rel_gate_error_m": {"median": None, "p95": None},
+    }
 
 
 def validate_report(report: dict) -> None:

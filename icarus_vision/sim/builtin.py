@@ -32,4 +32,6 @@ def resolve_track(spec: str | Path | Track | None) -> Track:
         return builtin_track(s)
     if s.endswith(".toml") or "/" in s or Path(s).exists():
         return load_track(s)
-    raise TrackError(f"unknown track {s!r}; built-in tracks: {', '.join(BUILTIN_TRACKS)} (or a .toml path)")
+    raise TrackError(
+        f"unknown track {s!r}; built-in tracks: {', '.join(BUILTIN_TRACKS)} (or a .toml path)"
+    )

@@ -80,7 +80,9 @@ class EnvConfig:
                 f"physics_hz ({self.physics_hz}) must be a positive integer multiple of ctrl_hz ({self.ctrl_hz})"
             )
         if self.gate_obs_frame not in ("world", "body"):
-            raise ValueError(f"gate_obs_frame must be 'world' or 'body', got {self.gate_obs_frame!r}")
+            raise ValueError(
+                f"gate_obs_frame must be 'world' or 'body', got {self.gate_obs_frame!r}"
+            )
         if self.num_gates is not None and self.num_gates < 1:
             raise ValueError(f"num_gates must be >= 1, got {self.num_gates}")
 

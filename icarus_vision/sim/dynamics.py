@@ -46,10 +46,14 @@ class QuadState:
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), q, np.zeros((n, 3)), np.zeros(n))
 
     def copy(self) -> QuadState:
-        return QuadState(*(a.copy() for a in (self.pos, self.vel, self.quat, self.omega, self.thrust)))
+        return QuadState(
+            *(a.copy() for a in (self.pos, self.vel, self.quat, self.omega, self.thrust))
+        )
 
     def take(self, idx) -> QuadState:
-        return QuadState(*(a[idx].copy() for a in (self.pos, self.vel, self.quat, self.omega, self.thrust)))
+        return QuadState(
+            *(a[idx].copy() for a in (self.pos, self.vel, self.quat, self.omega, self.thrust))
+        )
 
     def put(self, idx, other: QuadState) -> None:
         for name in ("pos", "vel", "quat", "omega", "thrust"):
@@ -172,7 +176,9 @@ def quat_mul(q: np.ndarray, r: np.ndarray) -> np.ndarray:
     return (q[:, :, None] * r[:, None, :]).reshape(n, 16) @ _QMUL
 
 
-def quat_integrate(q: np.ndarray, omega_body: np.ndarray, dt: float, normalize: bool = True) -> np.ndarray:
+def quat_integrate(
+    q: np.ndarray, omega_body: np.ndarray, dt: float, normalize: bool = True
+) -> np.ndarray:
     """Rotate attitudes by body rates over dt (exact for constant ω): q ⊗ exp(ω dt / 2).
 
     Args:
@@ -196,7 +202,9 @@ def quat_integrate(q: np.ndarray, omega_body: np.ndarray, dt: float, normalize: 
     return out
 
 
-def action_to_commands(action: np.ndarray, params: QuadBatchParams) -> tuple[np.ndarray, np.ndarray]:
+def action_to_commands(
+    action: np.ndarray, params: QuadBatchParams
+) -> tuple[np.ndarray, np.ndarray]:
     """Map actions (N, 4) in [-1, 1] to thrust commands (N,) in N and rate commands (N, 3) in rad/s."""
     thrust_cmd = (action[:, 0] + 1.0) * 0.5 * params.thrust_max
     rate_cmd = action[:, 1:] * params.max_rate
@@ -271,7 +279,9 @@ def step_substeps(
         state.thrust += (thrust_cmd - state.thrust) * k
         state.omega += (rate_cmd - state.omega) * k
         rot = quat_to_rot(state.quat)
-        acc = (rot[:, :, 2] * state.thrust[:, None] + drag_force(rot, state.vel, wind, params.drag)) * inv_m
+        acc = (
+            rot[:, :, 2] * state.thrust[:, None] + drag_force(rot, state.vel, wind, params.drag)
+        ) * inv_m
         acc += g
         state.vel += acc * dt
         state.pos += state.vel * dt

@@ -69,7 +69,9 @@ class DroneRacingEnv(gym.Env):
         """Place the drone in ``state`` in a world built for ``self.core.tracks[0]``."""
 
     @abstractmethod
-    def _backend_step(self, thrust_cmd, rate_cmd, wind) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _backend_step(
+        self, thrust_cmd, rate_cmd, wind
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Advance one control step; update ``self.state``.
 
         Returns:
@@ -84,7 +86,11 @@ class DroneRacingEnv(gym.Env):
         self.state = self.core.reset_drones(np.array([0]))
         self._backend_reset(self.state)
         self._needs_reset = False
-        info = {"gates_passed": 0, "gates_total": int(self.core.n_pass[0]), "track": self.core.tracks[0].name}
+        info = {
+            "gates_passed": 0,
+            "gates_total": int(self.core.n_pass[0]),
+            "track": self.core.tracks[0].name,
+        }
         return self.core.observe(self.state)[0], info
 
     def step(self, action):
@@ -94,7 +100,9 @@ class DroneRacingEnv(gym.Env):
         thrust_cmd, rate_cmd = dynamics.action_to_commands(a, self.core.params)
         p0 = self.state.pos.copy()
         trail, frame_hit, ground_hit = self._backend_step(thrust_cmd, rate_cmd, self.core.wind())
-        reward, term, trunc, crash, terms = self.core.finish_step(p0, self.state, frame_hit, ground_hit, trail)
+        reward, term, trunc, crash, terms = self.core.finish_step(
+            p0, self.state, frame_hit, ground_hit, trail
+        )
         info = self.core.info(0, terms, int(crash[0]))
         self._needs_reset = bool(term[0] or trunc[0])
         obs = self.core.observe(self.state, self.core.last_rpy)[0]
@@ -140,7 +148,14 @@ def integrate_batched(core: RaceCore, state: QuadState, thrust_cmd, rate_cmd, wi
     cfg = core.cfg
     dt = 1.0 / cfg.physics_hz
     trail = dynamics.step_substeps(
-        state, thrust_cmd, rate_cmd, wind, core.params, dt, cfg.substeps, ground_clamp=~core.taken_off
+        state,
+        thrust_cmd,
+        rate_cmd,
+        wind,
+        core.params,
+        dt,
+        cfg.substeps,
+        ground_clamp=~core.taken_off,
     )
     frame_hit = core.frame_collision(trail)
     ground_hit = (trail[:, :, 2] < core.params.radius).any(axis=0)

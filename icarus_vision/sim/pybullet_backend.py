@@ -8,9 +8,9 @@ thrust, drag and rate-controller torque come from ``dynamics.body_wrench`` and t
 from __future__ import annotations
 
 import numpy as np
-from icarus_vision.sim.bullet import p
 
 from icarus_vision.sim import dynamics
+from icarus_vision.sim.bullet import p
 from icarus_vision.sim.dynamics import QuadState
 from icarus_vision.sim.env import DroneRacingEnv
 from icarus_vision.sim.quad import GRAVITY
@@ -38,13 +38,18 @@ def gate_bar_boxes(size: float, frame_width: float) -> list[tuple[tuple, tuple]]
     ]
 
 
-def build_gate(client: int, pos, yaw: float, size: float, frame_width: float, rgba=GATE_RGBA) -> int:
+def build_gate(
+    client: int, pos, yaw: float, size: float, frame_width: float, rgba=GATE_RGBA
+) -> int:
     """Create one static gate body (four box bars, collision + visual) and return its id."""
     boxes = gate_bar_boxes(size, frame_width)
     halves = [list(b[0]) for b in boxes]
     centres = [list(b[1]) for b in boxes]
     col = p.createCollisionShapeArray(
-        [p.GEOM_BOX] * 4, halfExtents=halves, collisionFramePositions=centres, physicsClientId=client
+        [p.GEOM_BOX] * 4,
+        halfExtents=halves,
+        collisionFramePositions=centres,
+        physicsClientId=client,
     )
     vis = p.createVisualShapeArray(
         [p.GEOM_BOX] * 4,
@@ -70,7 +75,9 @@ def build_world(client: int, track: Track) -> tuple[int, list[int]]:
         rgbaColor=list(GROUND_RGBA), physicsClientId=client,
     )  # fmt: skip
     ground = p.createMultiBody(0.0, plane, plane_vis, [0, 0, 0], physicsClientId=client)
-    gates = [build_gate(client, g.pos, g.yaw, g.size, g.frame_width) for g in track.physical_gates()]
+    gates = [
+        build_gate(client, g.pos, g.yaw, g.size, g.frame_width) for g in track.physical_gates()
+    ]
     return ground, gates
 
 
@@ -96,7 +103,9 @@ class PyBulletDroneRacingEnv(DroneRacingEnv):
         self.ground, self.gate_ids = build_world(c, track)
         quad = self.config.quad
         sphere = p.createCollisionShape(p.GEOM_SPHERE, radius=quad.radius, physicsClientId=c)
-        vis = p.createVisualShape(p.GEOM_SPHERE, radius=quad.radius, rgbaColor=[0.1, 0.1, 0.1, 1], physicsClientId=c)
+        vis = p.createVisualShape(
+            p.GEOM_SPHERE, radius=quad.radius, rgbaColor=[0.1, 0.1, 0.1, 1], physicsClientId=c
+        )
         self.drone = p.createMultiBody(quad.mass, sphere, vis, [0, 0, 1], physicsClientId=c)
         p.changeDynamics(
             self.drone, -1, localInertiaDiagonal=list(quad.inertia), linearDamping=0.0,
@@ -114,9 +123,16 @@ class PyBulletDroneRacingEnv(DroneRacingEnv):
             self.drone, -1, mass=float(self.core.params.mass[0]),
             localInertiaDiagonal=list(self.config.quad.inertia), physicsClientId=c,
         )  # fmt: skip
-        p.resetBasePositionAndOrientation(self.drone, state.pos[0].tolist(), state.quat[0].tolist(), physicsClientId=c)
+        p.resetBasePositionAndOrientation(
+            self.drone, state.pos[0].tolist(), state.quat[0].tolist(), physicsClientId=c
+        )
         self._rot = dynamics.quat_to_rot(state.quat)
-        p.resetBaseVelocity(self.drone, state.vel[0].tolist(), (self._rot[0] @ state.omega[0]).tolist(), physicsClientId=c)
+        p.resetBaseVelocity(
+            self.drone,
+            state.vel[0].tolist(),
+            (self._rot[0] @ state.omega[0]).tolist(),
+            physicsClientId=c,
+        )
 
     def _read_state(self) -> None:
         c, s = self.client, self.state
@@ -133,10 +149,21 @@ class PyBulletDroneRacingEnv(DroneRacingEnv):
         frame_hit = ground_hit = False
         gates = set(self.gate_ids)
         for k in range(cfg.substeps):
-            thrust, force, torque = dynamics.body_wrench(self.state, thrust_cmd, rate_cmd, wind, params, dt, self._rot)
+            thrust, force, torque = dynamics.body_wrench(
+                self.state, thrust_cmd, rate_cmd, wind, params, dt, self._rot
+            )
             self.state.thrust[:] = thrust
-            p.applyExternalForce(self.drone, -1, force[0].tolist(), self.state.pos[0].tolist(), p.WORLD_FRAME, physicsClientId=c)
-            p.applyExternalTorque(self.drone, -1, torque[0].tolist(), p.WORLD_FRAME, physicsClientId=c)
+            p.applyExternalForce(
+                self.drone,
+                -1,
+                force[0].tolist(),
+                self.state.pos[0].tolist(),
+                p.WORLD_FRAME,
+                physicsClientId=c,
+            )
+            p.applyExternalTorque(
+                self.drone, -1, torque[0].tolist(), p.WORLD_FRAME, physicsClientId=c
+            )
             p.stepSimulation(physicsClientId=c)
             self._read_state()
             trail[k, 0] = self.state.pos[0]

@@ -14,7 +14,13 @@ import numpy as np
 from icarus_vision.sim import rules
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
-from icarus_vision.sim.dynamics import QuadBatchParams, QuadState, quat_to_rot, quat_to_rpy, rpy_to_quat
+from icarus_vision.sim.dynamics import (
+    QuadBatchParams,
+    QuadState,
+    quat_to_rot,
+    quat_to_rpy,
+    rpy_to_quat,
+)
 from icarus_vision.sim.random_track import random_track
 from icarus_vision.sim.reward import compute_reward
 from icarus_vision.sim.track import SAME_GATE_TOL, Gate, Track
@@ -42,28 +48,30 @@ def validate_action(action, n: int) -> np.ndarray:
         a = a[None]
     if a.shape != (n, 4):
         want = "(4,)" if n == 1 else f"({n}, 4)"
-        raise ValueError(f"action must have shape {want} [thrust, roll_rate, pitch_rate, yaw_rate], got {a.shape}")
+        raise ValueError(
+            f"action must have shape {want} [thrust, roll_rate, pitch_rate, yaw_rate], got {a.shape}"
+        )
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"action contains NaN or inf: {a[~np.isfinite(a).all(axis=1)][0].tolist()}")
+        raise ValueError(
+            f"action contains NaN or inf: {a[~np.isfinite(a).all(axis=1)][0].tolist()}"
+        )
     return np.clip(a, -1.0, 1.0)
 
 
 def jitter_track(track: Track, rng: np.random.Generator, pos_m: float, yaw_deg: float) -> Track:
-    """Move each physical gate by a random offset (a gate flown twice moves once)."""
-    phys: list[tuple[np.ndarray, np.ndarray, float]] = []
-    gates = []
-    for g in track.gates:
-        p = np.array(g.pos)
-        for q, dp, dyaw in phys:
-            if np.linalg.norm(p - q) < SAME_GATE_TOL:
-                break
-        else:
-            dp, dyaw = rng.uniform(-pos_m, pos_m, 3), rng.uniform(-yaw_deg, yaw_deg)
-            phys.append((p, dp, dyaw))
-        new = p + dp
-        new[2] = max(new[2], 0.8)
-        gates.append(replace(g, pos=tuple(float(v) for v in new), yaw_deg=g.yaw_deg + dyaw))
-    return replace(track, gates=tuple(gates), bounds_min=None, bounds_max=None)
+    """Move each physical gate by a random offset (a gate flown twice moves once); z stays >= 0.8 m."""
+    pos = np.array([g.pos for g in track.gates])
+    close = np.linalg.norm(pos[:, None] - pos[None], axis=2) < SAME_GATE_TOL
+    group = close.argmax(axis=1)  # index of the first entry of each physical gate
+    dp = rng.uniform(-pos_m, pos_m, (len(pos), 3))[group]
+    dyaw = rng.uniform(-yaw_deg, yaw_deg, len(pos))[group]
+    new = pos + dp
+    new[:, 2] = np.maximum(new[:, 2], 0.8)
+    gates = tuple(
+        Gate((float(p[0]), float(p[1]), float(p[2])), g.yaw_deg + float(dy), g.size, g.frame_width)
+        for g, p, dy in zip(track.gates, new, dyaw, strict=True)
+    )
+    return replace(track, gates=gates, bounds_min=None, bounds_max=None)
 
 
 class RaceCore:
@@ -143,7 +151,13 @@ class RaceCore:
         else:
             track = self.base_track
             if self.num_gates is not None and self.num_gates < len(track.gates):
-                track = replace(track, gates=track.gates[: self.num_gates], laps=1, bounds_min=None, bounds_max=None)
+                track = replace(
+                    track,
+                    gates=track.gates[: self.num_gates],
+                    laps=1,
+                    bounds_min=None,
+                    bounds_max=None,
+                )
         r = self.cfg.randomization
         if r.enabled and (r.gate_pos_jitter_m > 0 or r.gate_yaw_jitter_deg > 0):
             track = jitter_track(track, rng, r.gate_pos_jitter_m, r.gate_yaw_jitter_deg)
@@ -185,7 +199,9 @@ class RaceCore:
                 mass *= rng.uniform(1 - r.mass_pct, 1 + r.mass_pct)
                 thrust_max *= rng.uniform(1 - r.thrust_pct, 1 + r.thrust_pct)
                 ang = rng.uniform(0, 2 * math.pi)
-                self.wind_const[i] = rng.uniform(0, r.wind_mps) * np.array([math.cos(ang), math.sin(ang), 0.0])
+                self.wind_const[i] = rng.uniform(0, r.wind_mps) * np.array(
+                    [math.cos(ang), math.sin(ang), 0.0]
+                )
                 self.gust_amp[i] = rng.uniform(0, r.gust_mps, (3, 3)) / 3.0
                 self.gust_freq[i] = rng.uniform(*GUST_FREQ_HZ, (3, 3))
                 self.gust_phase[i] = rng.uniform(0, 2 * math.pi, (3, 3))
@@ -209,7 +225,9 @@ class RaceCore:
     def wind(self) -> np.ndarray:
         """(N, 3) world air velocity at the current time of each drone, m/s."""
         t = self.t[:, None, None]
-        gust = (self.gust_amp * np.sin(2 * math.pi * self.gust_freq * t + self.gust_phase)).sum(axis=1)
+        gust = (self.gust_amp * np.sin(2 * math.pi * self.gust_freq * t + self.gust_phase)).sum(
+            axis=1
+        )
         return self.wind_const + gust
 
     def target_gate(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -236,7 +254,9 @@ class RaceCore:
             return hit
         d = trail[:, ni, :] - self.g_pos[ni, gi]
         c, s = self.g_cos[ni, gi], self.g_sin[ni, gi]
-        local = np.stack((c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]), axis=-1)
+        local = np.stack(
+            (c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]), axis=-1
+        )
         dist_sq = rules.bar_distance_sq_local(local, self.g_size[ni, gi], self.g_fw[ni, gi])
         hit[ni[(dist_sq < self.params.radius**2).any(axis=0)]] = True
         return hit
@@ -306,7 +326,9 @@ class RaceCore:
         rel = gpos - state.pos
         if self.cfg.gate_obs_frame == "body":
             rel = np.einsum("nji,nj->ni", quat_to_rot(state.quat), rel)
-        return np.concatenate((state.pos, state.vel, rpy, state.omega, rel), axis=1).astype(np.float32)
+        return np.concatenate((state.pos, state.vel, rpy, state.omega, rel), axis=1).astype(
+            np.float32
+        )
 
     def info(self, i: int, terms: dict, crash_code: int) -> dict:
         """The info dict of drone ``i`` for the step just taken."""

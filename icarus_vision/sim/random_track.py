@@ -45,32 +45,31 @@ def random_track(
     if n_gates < 1:
         raise ValueError(f"n_gates must be >= 1, got {n_gates}")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    start = np.zeros(3)
     for _ in range(max_tries):
+        # One batch of draws per attempt; the loop below is plain float arithmetic.
+        dist = rng.uniform(*spacing, n_gates)
+        turn = np.radians(rng.uniform(-max_turn_deg, max_turn_deg, n_gates))
+        climb = rng.uniform(-max_climb, max_climb, n_gates)
+        offset = np.radians(rng.uniform(-yaw_offset_deg, yaw_offset_deg, n_gates))
+        x, y, z, heading = 0.0, 0.0, float(rng.uniform(*height)), 0.0
+        placed = np.zeros((n_gates, 2))
         gates: list[Gate] = []
-        prev = np.array([0.0, 0.0, rng.uniform(*height)])
-        heading = 0.0
-        ok = True
         for i in range(n_gates):
-            d = rng.uniform(*spacing)
-            turn = 0.0 if i == 0 else math.radians(rng.uniform(-max_turn_deg, max_turn_deg))
-            direction = heading + turn
-            z = float(np.clip(prev[2] + rng.uniform(-max_climb, max_climb), *height))
-            pos = np.array([prev[0] + d * math.cos(direction), prev[1] + d * math.sin(direction), z])
-            if i == 0:
-                pos[1] = 0.0
-            if any(np.linalg.norm(pos[:2] - np.array(g.pos[:2])) < min_separation for g in gates):
-                ok = False
-                break
-            if np.linalg.norm(pos[:2] - start[:2]) < min_separation:
-                ok = False
-                break
-            yaw = direction + math.radians(rng.uniform(-yaw_offset_deg, yaw_offset_deg))
-            gates.append(
-                Gate(tuple(float(v) for v in pos), math.degrees(yaw), size, frame_width)
+            direction = heading + (turn[i] if i else 0.0)
+            x, y = (
+                x + dist[i] * math.cos(direction),
+                (y + dist[i] * math.sin(direction)) if i else 0.0,
             )
-            prev, heading = pos, yaw
-        if ok:
+            z = min(max(z + climb[i], height[0]), height[1])
+            gap = placed[:i] - (x, y)
+            if (
+                i and np.einsum("ij,ij->i", gap, gap).min() < min_separation**2
+            ) or x * x + y * y < min_separation**2:
+                break
+            placed[i] = (x, y)
+            heading = direction + offset[i]
+            gates.append(Gate((x, y, z), math.degrees(heading), size, frame_width))
+        else:
             label = seed if isinstance(seed, int) else "rng"
             return Track(f"random-{n_gates}-{label}", tuple(gates), (0.0, 0.0, 0.2), 0.0)
     raise RuntimeError(f"could not draw a {n_gates}-gate track in {max_tries} tries")

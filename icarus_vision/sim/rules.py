@@ -29,7 +29,9 @@ def to_gate_frame(points: np.ndarray, gate_pos: np.ndarray, gate_yaw: np.ndarray
     return np.stack((x, y, d[..., 2]), axis=-1)
 
 
-def bar_distance_sq_local(local: np.ndarray, size: np.ndarray, frame_width: np.ndarray) -> np.ndarray:
+def bar_distance_sq_local(
+    local: np.ndarray, size: np.ndarray, frame_width: np.ndarray
+) -> np.ndarray:
     """Squared distance from points in gate frame to the gate's four frame bars (0 inside a bar).
 
     The bars are square in section (``frame_width`` wide and deep) and surround the opening;
@@ -53,7 +55,9 @@ def bar_distance_sq_local(local: np.ndarray, size: np.ndarray, frame_width: np.n
     dy_top = np.maximum(y - h - w, 0.0)
     dy_side = np.maximum(np.abs(y - h - hw) - hw, 0.0)
     dz_side = np.maximum(z - h, 0.0)
-    return dx * dx + np.minimum(dy_top * dy_top + dz_top * dz_top, dy_side * dy_side + dz_side * dz_side)
+    return dx * dx + np.minimum(
+        dy_top * dy_top + dz_top * dz_top, dy_side * dy_side + dz_side * dz_side
+    )
 
 
 def bar_distance_local(local: np.ndarray, size: np.ndarray, frame_width: np.ndarray) -> np.ndarray:

@@ -165,6 +165,33 @@ def inside_gate_frame(point, gate: Gate, margin: float = 0.0) -> bool:
     return bool(d[0, 0] <= margin)
 
 
+def start_inside_frames(track: Track) -> np.ndarray:
+    """(G,) bool: whether the start position lies inside each gate's frame bars."""
+    from icarus_vision.sim.rules import gate_bar_distance  # local: rules imports this module
+
+    g = track.gates
+    d = gate_bar_distance(
+        np.asarray(track.start_pos, float)[None],
+        np.array([x.pos for x in g], float)[None],
+        np.array([[x.yaw for x in g]]),
+        np.array([[x.size for x in g]]),
+        np.array([[x.frame_width for x in g]]),
+    )
+    return d[0] <= 0.0
+
+
+def _gates_plainly_valid(gates) -> bool:
+    """Fast vectorised check that every gate field is a finite number and sizes are positive."""
+    try:
+        rows = [(*g.pos, g.yaw_deg, g.size, g.frame_width) for g in gates]
+        if any(isinstance(v, bool | str) for r in rows for v in r):
+            return False
+        a = np.array(rows, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return a.shape == (len(gates), 6) and bool(np.isfinite(a).all() and (a[:, 4:] > 0).all())
+
+
 def validate_track(track: Track) -> None:
     """Check a track; raise TrackError naming the source file and the gate."""
     src = track.source
@@ -174,16 +201,21 @@ def validate_track(track: Track) -> None:
         raise TrackError(f"{src}: laps must be an integer >= 1, got {track.laps!r}")
     _vec3(list(track.start_pos), "start.pos", f"{src} [start]")
     _finite(track.start_yaw_deg, "start.yaw_deg", f"{src} [start]")
-    for i, g in enumerate(track.gates):
-        where = f"{src} gate {i}"
-        _vec3(list(g.pos), "pos", where)
-        _finite(g.yaw_deg, "yaw_deg", where)
-        if _finite(g.size, "size", where) <= 0:
-            raise TrackError(f"{where}: size must be > 0, got {g.size}")
-        if _finite(g.frame_width, "frame_width", where) <= 0:
-            raise TrackError(f"{where}: frame_width must be > 0, got {g.frame_width}")
-        if inside_gate_frame(track.start_pos, g):
-            raise TrackError(f"{where}: the start position {track.start_pos} is inside its frame")
+    if not _gates_plainly_valid(track.gates):  # slow path only to name the offending gate
+        for i, g in enumerate(track.gates):
+            where = f"{src} gate {i}"
+            _vec3(list(g.pos), "pos", where)
+            _finite(g.yaw_deg, "yaw_deg", where)
+            if _finite(g.size, "size", where) <= 0:
+                raise TrackError(f"{where}: size must be > 0, got {g.size}")
+            if _finite(g.frame_width, "frame_width", where) <= 0:
+                raise TrackError(f"{where}: frame_width must be > 0, got {g.frame_width}")
+    inside = start_inside_frames(track)
+    if inside.any():
+        i = int(np.flatnonzero(inside)[0])
+        raise TrackError(
+            f"{src} gate {i}: the start position {track.start_pos} is inside its frame"
+        )
     if track.bounds_min is not None and track.bounds_max is not None:
         lo = np.array(_vec3(list(track.bounds_min), "bounds.min", f"{src} [bounds]"))
         hi = np.array(_vec3(list(track.bounds_max), "bounds.max", f"{src} [bounds]"))

@@ -27,7 +27,14 @@ from icarus_vision.sim.race_core import RaceCore, validate_action
 class BatchedRacingVecEnv(VecEnv):
     """``num_envs`` drones stepped together by the numpy backend."""
 
-    def __init__(self, num_envs: int, config: EnvConfig | None = None, *, info_mode: str = "episode", **overrides) -> None:
+    def __init__(
+        self,
+        num_envs: int,
+        config: EnvConfig | None = None,
+        *,
+        info_mode: str = "episode",
+        **overrides,
+    ) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if info_mode not in ("episode", "full"):
@@ -64,8 +71,12 @@ class BatchedRacingVecEnv(VecEnv):
         core = self.core
         thrust_cmd, rate_cmd = dynamics.action_to_commands(self._actions, core.params)
         p0 = self.state.pos.copy()
-        trail, frame_hit, ground_hit = integrate_batched(core, self.state, thrust_cmd, rate_cmd, core.wind())
-        reward, term, trunc, crash, terms = core.finish_step(p0, self.state, frame_hit, ground_hit, trail)
+        trail, frame_hit, ground_hit = integrate_batched(
+            core, self.state, thrust_cmd, rate_cmd, core.wind()
+        )
+        reward, term, trunc, crash, terms = core.finish_step(
+            p0, self.state, frame_hit, ground_hit, trail
+        )
         self.last_reward_terms = terms
         done = term | trunc
         if self.info_mode == "full":

@@ -5,7 +5,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from icarus_vision.sim.dynamics import rpy_to_quat, quat_to_rot
+from icarus_vision.sim.dynamics import quat_to_rot, rpy_to_quat
 
 GATE_SLICE = slice(12, 15)
 RPY_SLICE = slice(6, 9)

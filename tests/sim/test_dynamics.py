@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from icarus_vision.sim.dynamics import QuadState, quat_integrate, quat_to_rot, quat_to_rpy, rpy_to_quat
+from icarus_vision.sim.dynamics import (
+    QuadState,
+    quat_integrate,
+    quat_to_rot,
+    quat_to_rpy,
+    rpy_to_quat,
+)
 from icarus_vision.sim.quad import GRAVITY, QuadParams
 
 
@@ -52,7 +58,9 @@ def test_rate_command_tracked_after_lag(make):
     target = cmd * np.array(q.max_rate)
     obs, *_ = env.step([q.hover_thrust_action, *cmd])
     first = obs[9:12]  # after 20 ms: 1 - exp(-0.02 / 0.03) of the way
-    np.testing.assert_allclose(first, target * (1 - math.exp(-0.02 / q.motor_tau)), rtol=0.05, atol=0.02)
+    np.testing.assert_allclose(
+        first, target * (1 - math.exp(-0.02 / q.motor_tau)), rtol=0.05, atol=0.02
+    )
     for _ in range(9):  # 0.2 s = 6.7 time constants
         obs, *_ = env.step([q.hover_thrust_action, *cmd])
     np.testing.assert_allclose(obs[9:12], target, rtol=0.02, atol=0.02)

@@ -27,7 +27,9 @@ def test_gymnasium_and_sb3_checkers(backend):
 
 
 def test_seed_determinism_with_randomisation(make):
-    cfg = EnvConfig(random_tracks=True, num_gates=3, randomization=RandomizationConfig(enabled=True))
+    cfg = EnvConfig(
+        random_tracks=True, num_gates=3, randomization=RandomizationConfig(enabled=True)
+    )
     runs = []
     for _ in range(2):
         env = make(config=cfg)
@@ -51,7 +53,9 @@ def test_backends_agree_from_the_same_state():
     envs = [BatchedDroneRacingEnv(track="single-gate"), PyBulletDroneRacingEnv(track="single-gate")]
     rng = np.random.default_rng(3)
     hover = envs[0].config.quad.hover_thrust_action
-    actions = np.clip(np.c_[hover + rng.normal(0.05, 0.1, 100), rng.normal(0, 0.25, (100, 3))], -1, 1)
+    actions = np.clip(
+        np.c_[hover + rng.normal(0.05, 0.1, 100), rng.normal(0, 0.25, (100, 3))], -1, 1
+    )
     ends = []
     for env in envs:
         env.reset(seed=0)
@@ -70,7 +74,9 @@ def test_backends_agree_from_the_same_state():
 
 def test_n_batched_drones_equal_n_single_envs():
     n = 6
-    cfg = EnvConfig(random_tracks=True, num_gates=3, randomization=RandomizationConfig(enabled=True))
+    cfg = EnvConfig(
+        random_tracks=True, num_gates=3, randomization=RandomizationConfig(enabled=True)
+    )
     vec = BatchedRacingVecEnv(n, cfg)
     vec.seed(11)
     obs = vec.reset()
@@ -97,7 +103,9 @@ def test_n_batched_drones_equal_n_single_envs():
 
 
 def test_random_and_extreme_actions_never_produce_nan():
-    vec = BatchedRacingVecEnv(100, EnvConfig(random_tracks=True, randomization=RandomizationConfig(enabled=True)))
+    vec = BatchedRacingVecEnv(
+        100, EnvConfig(random_tracks=True, randomization=RandomizationConfig(enabled=True))
+    )
     vec.seed(0)
     vec.reset()
     rng = np.random.default_rng(1)
@@ -123,7 +131,12 @@ def test_bad_actions_raise_value_error(make):
     with pytest.raises(RuntimeError, match="reset"):
         env.step([0, 0, 0, 0])
     env.reset(seed=0)
-    for bad, match in [([0, 0, 0], "shape"), (np.zeros((2, 4)), "shape"), ([0, np.nan, 0, 0], "NaN or inf"), ([np.inf, 0, 0, 0], "NaN or inf")]:
+    for bad, match in [
+        ([0, 0, 0], "shape"),
+        (np.zeros((2, 4)), "shape"),
+        ([0, np.nan, 0, 0], "NaN or inf"),
+        ([np.inf, 0, 0, 0], "NaN or inf"),
+    ]:
         with pytest.raises(ValueError, match=match):
             env.step(bad)
     vec = BatchedRacingVecEnv(3, track="single-gate")
@@ -160,9 +173,9 @@ def test_info_reward_terms_and_observation(make):
 def test_time_limit_truncates():
     env = BatchedDroneRacingEnv(track="single-gate", max_episode_s=1.0)
     env.reset(seed=0)
-    for k in range(50):
-        _, _, term, trunc, _ = env.step([-1.0, 0, 0, 0])
-    assert trunc and not term and k == 49
+    ends = [env.step([-1.0, 0, 0, 0])[2:4] for _ in range(50)]
+    assert ends[-1] == (False, True)  # truncated at exactly 1 s = 50 steps
+    assert not any(term or trunc for term, trunc in ends[:-1])
 
 
 def test_set_num_gates_through_env_method():
@@ -204,7 +217,7 @@ def test_gate_relative_obs_wrapper_matches_body_frame_env():
     body = BatchedDroneRacingEnv(track="three-gates", gate_obs_frame="body")
     ow, _ = world.reset(seed=0)
     ob, _ = body.reset(seed=0)
-    for k in range(30):
+    for _k in range(30):
         a = [0.1, 0.2, -0.1, 0.3]
         ow, *_ = world.step(a)
         ob, *_ = body.step(a)

@@ -52,8 +52,15 @@ def test_bar_distance_matches_built_boxes():
         q = np.maximum(np.abs(pts - centre) - half, 0)
         d_boxes = np.minimum(d_boxes, np.linalg.norm(q, axis=1))
     np.testing.assert_allclose(d_rules, d_boxes, atol=1e-12)
-    assert rules.bar_distance_local(np.array([[0, 0, 0]]), np.array([size]), np.array([fw]))[0] > 0.5
-    assert rules.bar_distance_local(np.array([[0, 0, size / 2 + fw / 2]]), np.array([size]), np.array([fw]))[0] == 0
+    assert (
+        rules.bar_distance_local(np.array([[0, 0, 0]]), np.array([size]), np.array([fw]))[0] > 0.5
+    )
+    assert (
+        rules.bar_distance_local(
+            np.array([[0, 0, size / 2 + fw / 2]]), np.array([size]), np.array([fw])
+        )[0]
+        == 0
+    )
 
 
 def fly_straight(make, start, vel, track, steps=60):
@@ -111,7 +118,9 @@ def test_rotated_and_moved_gate(make):
 
 def test_gate_flown_twice_in_opposite_directions(make):
     g = (5.0, 0.0, 2.0)
-    track = Track("twice", (Gate(g, 0.0), Gate((9.0, 0.0, 2.0), 0.0), Gate(g, 180.0)), (0.0, 0.0, 0.2))
+    track = Track(
+        "twice", (Gate(g, 0.0), Gate((9.0, 0.0, 2.0), 0.0), Gate(g, 180.0)), (0.0, 0.0, 0.2)
+    )
     env = make(track=track)
     env.reset(seed=0)
     assert len(track.physical_gates()) == 2
@@ -166,5 +175,13 @@ def test_frame_collision_threshold(radius_margin, hit):
     r = 0.15
     # point beside the right bar's outer face (bar spans |y| in [0.5, 0.6])
     p = np.array([[0.0, -(0.6 + r + radius_margin), 0.0]])
-    got = rules.frame_collision(p, r, np.zeros((1, 1, 3)), np.zeros((1, 1)), np.ones((1, 1)), np.full((1, 1), 0.1), np.ones((1, 1), bool))
+    got = rules.frame_collision(
+        p,
+        r,
+        np.zeros((1, 1, 3)),
+        np.zeros((1, 1)),
+        np.ones((1, 1)),
+        np.full((1, 1), 0.1),
+        np.ones((1, 1), bool),
+    )
     assert bool(got[0]) == hit

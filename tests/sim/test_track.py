@@ -74,15 +74,36 @@ def test_corner_order_tl_tr_br_bl():
 @pytest.mark.parametrize(
     "text, match",
     [
-        ('[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\n', "missing required key 'name'"),
-        ('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\nyaw_deg=0.0\n', "gate 0: missing required key 'pos'"),
-        ('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\ncolour=1\n', "gate 0: unknown key"),
+        ("[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\n", "missing required key 'name'"),
+        (
+            'name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\nyaw_deg=0.0\n',
+            "gate 0: missing required key 'pos'",
+        ),
+        (
+            'name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\ncolour=1\n',
+            "gate 0: unknown key",
+        ),
         ('name="x"\nspeed=1\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\n', "unknown key"),
-        ('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\n[[gates]]\npos=[9,0,nan]\n', "gate 1: pos must be a finite"),
-        ('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nyaw_deg=inf\n', "gate 0: yaw_deg must be a finite"),
-        ('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nsize=0.0\n', "gate 0: size must be > 0"),
-        ('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nsize=-1.0\n', "gate 0: size must be > 0"),
-        ('name="x"\n[start]\npos=[5,0.55,2]\n[[gates]]\npos=[5,0,2]\n', "gate 0: the start position"),
+        (
+            'name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\n[[gates]]\npos=[9,0,nan]\n',
+            "gate 1: pos must be a finite",
+        ),
+        (
+            'name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nyaw_deg=inf\n',
+            "gate 0: yaw_deg must be a finite",
+        ),
+        (
+            'name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nsize=0.0\n',
+            "gate 0: size must be > 0",
+        ),
+        (
+            'name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nsize=-1.0\n',
+            "gate 0: size must be > 0",
+        ),
+        (
+            'name="x"\n[start]\npos=[5,0.55,2]\n[[gates]]\npos=[5,0,2]\n',
+            "gate 0: the start position",
+        ),
         ('name="x"\n[start]\npos=[0,0]\n[[gates]]\npos=[5,0,2]\n', "start.pos must be a list of 3"),
         ('name="x"\n[start]\npos=[0,0,0.2]\n', "at least one gate"),
         ('name="x"\nlaps=0\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\n', "laps must be"),
