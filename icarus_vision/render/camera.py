@@ -29,6 +29,10 @@ _R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
 # OpenCV optical frame -> OpenGL eye frame (x right, y up, z backward).
 _CV_TO_GL = np.diag([1.0, -1.0, -1.0])
 
+TINY_RENDERER_SAMPLE_OFFSET = (-0.5, 0.5)
+"""Where PyBullet's TinyRenderer samples pixel (u, v) relative to its centre (measured: it covers
+pixel corners, rows flipped), so that :meth:`Camera.projection_matrix` can compensate."""
+
 
 def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
     """Pinhole matrix K for square pixels and a centred principal point.
@@ -55,9 +59,13 @@ def body_to_camera_rotation(uptilt_deg: float, roll_deg: float = 0.0) -> np.ndar
     """
     a = math.radians(uptilt_deg)
     # Pitch up = rotation by -uptilt about body y (a positive rotation about y tips x down).
-    pitch_up = np.array([[math.cos(a), 0.0, -math.sin(a)], [0.0, 1.0, 0.0], [math.sin(a), 0.0, math.cos(a)]])
+    pitch_up = np.array(
+        [[math.cos(a), 0.0, -math.sin(a)], [0.0, 1.0, 0.0], [math.sin(a), 0.0, math.cos(a)]]
+    )
     r = math.radians(roll_deg)
-    roll = np.array([[math.cos(r), -math.sin(r), 0.0], [math.sin(r), math.cos(r), 0.0], [0.0, 0.0, 1.0]])
+    roll = np.array(
+        [[math.cos(r), -math.sin(r), 0.0], [math.sin(r), math.cos(r), 0.0], [0.0, 0.0, 1.0]]
+    )
     return pitch_up @ _R_BODY_OPTICAL @ roll
 
 
@@ -81,7 +89,9 @@ def camera_poses(
     return quat_to_rot(quat) @ r_body_cam, pos.copy()
 
 
-def world_to_camera(points: np.ndarray, r_world_cam: np.ndarray, t_world_cam: np.ndarray) -> np.ndarray:
+def world_to_camera(
+    points: np.ndarray, r_world_cam: np.ndarray, t_world_cam: np.ndarray
+) -> np.ndarray:
     """Express world points in the camera (optical) frame.
 
     Args:
@@ -96,10 +106,15 @@ def world_to_camera(points: np.ndarray, r_world_cam: np.ndarray, t_world_cam: np
     return (np.asarray(points, dtype=float) - t) @ np.asarray(r_world_cam, dtype=float)
 
 
-def camera_to_world(points_cam: np.ndarray, r_world_cam: np.ndarray, t_world_cam: np.ndarray) -> np.ndarray:
+def camera_to_world(
+    points_cam: np.ndarray, r_world_cam: np.ndarray, t_world_cam: np.ndarray
+) -> np.ndarray:
     """Inverse of :func:`world_to_camera`; shapes as there."""
     r = np.asarray(r_world_cam, dtype=float)
-    return np.asarray(points_cam, dtype=float) @ np.swapaxes(r, -1, -2) + np.asarray(t_world_cam)[..., None, :]
+    return (
+        np.asarray(points_cam, dtype=float) @ np.swapaxes(r, -1, -2)
+        + np.asarray(t_world_cam)[..., None, :]
+    )
 
 
 def project_points(k: np.ndarray, points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -140,7 +155,9 @@ def unproject_pixels(k: np.ndarray, pixels: np.ndarray, depth: np.ndarray) -> np
     return np.stack([x, y, z], axis=-1)
 
 
-def gl_projection_matrix(k: np.ndarray, width: int, height: int, near: float, far: float) -> np.ndarray:
+def gl_projection_matrix(
+    k: np.ndarray, width: int, height: int, near: float, far: float
+) -> np.ndarray:
     """OpenGL projection matrix that rasterises exactly like K (pixel centres at integer (u, v)).
 
     Returns:
@@ -263,9 +280,18 @@ class Camera:
         """PyBullet ``viewMatrix`` (16 floats, column-major) for one body pose."""
         return gl_view_matrix(*self.pose(pos, quat)).flatten(order="F").tolist()
 
-    def projection_matrix(self) -> list[float]:
-        """PyBullet ``projectionMatrix`` (16 floats, column-major) matching K."""
-        m = gl_projection_matrix(self.K, self.width, self.height, self.near, self.far)
+    def projection_matrix(self, sample_offset: tuple[float, float] = (0.0, 0.0)) -> list[float]:
+        """PyBullet ``projectionMatrix`` (16 floats, column-major) matching K.
+
+        Args:
+            sample_offset: where the rasteriser samples pixel (u, v), relative to its centre, in
+                pixels; compensated so that pixel (u, v) shows what K projects to (u, v).
+                TinyRenderer samples at (u - 0.5, v + 0.5): :data:`TINY_RENDERER_SAMPLE_OFFSET`.
+        """
+        k = self.K
+        k[0, 2] += sample_offset[0]
+        k[1, 2] += sample_offset[1]
+        m = gl_projection_matrix(k, self.width, self.height, self.near, self.far)
         return m.flatten(order="F").tolist()
 
     def depth_to_z(self, buffer: np.ndarray) -> np.ndarray:

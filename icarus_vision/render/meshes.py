@@ -34,7 +34,9 @@ class Mesh:
             np.concatenate([m.vertices for m in parts]),
             np.concatenate([m.normals for m in parts]),
             np.concatenate([m.uvs for m in parts]),
-            np.concatenate([m.indices + o for m, o in zip(parts, offs, strict=True)]).astype(np.int32),
+            np.concatenate([m.indices + o for m, o in zip(parts, offs, strict=True)]).astype(
+                np.int32
+            ),
         )
 
 

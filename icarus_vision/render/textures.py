@@ -72,7 +72,7 @@ def texture_image(material: Material, size: int = TEXTURE_PX) -> np.ndarray:
     if material.kind == "stripes":
         img[:, ij >= size // 2] = c2  # one stripe pair along u; bars get stripes across them
     elif material.kind == "checker":
-        mask = ((ij[:, None] >= size // 2) ^ (ij[None, :] >= size // 2))
+        mask = (ij[:, None] >= size // 2) ^ (ij[None, :] >= size // 2)
         img[mask] = c2
     elif material.kind == "noise":
         rng = np.random.default_rng(material.seed)

@@ -54,10 +54,14 @@ def test_round_trip_with_random_poses():
 
 def test_uptilt_points_optical_axis_up_and_roll_about_it():
     r = body_to_camera_rotation(30.0)
-    np.testing.assert_allclose(r[:, 2], [math.cos(math.radians(30)), 0.0, math.sin(math.radians(30))])
+    np.testing.assert_allclose(
+        r[:, 2], [math.cos(math.radians(30)), 0.0, math.sin(math.radians(30))]
+    )
     np.testing.assert_allclose(r[:, 0], [0.0, -1.0, 0.0], atol=1e-12)  # image right = body right
     cam = Camera(uptilt_deg=30.0)
-    px, _ = cam.project(np.array([[5.0, 0.0, 5.0 * math.tan(math.radians(30))]]), np.zeros(3), LEVEL)
+    px, _ = cam.project(
+        np.array([[5.0, 0.0, 5.0 * math.tan(math.radians(30))]]), np.zeros(3), LEVEL
+    )
     np.testing.assert_allclose(px[0], [159.5, 119.5], atol=1e-9)
     rolled = body_to_camera_rotation(30.0, 10.0)
     np.testing.assert_allclose(rolled[:, 2], r[:, 2], atol=1e-12)

@@ -21,14 +21,18 @@ def test_corner_order_approaching_along_x(one_gate_scene):
     assert list(lab.visibility) == [VISIBLE] * 4
     assert lab.gate_id == 0 and lab.passage == 0 and abs(lab.distance - 4.0) < 1e-9
     np.testing.assert_allclose(lab.t_cam_gate, [0.0, 0.0, 4.0], atol=1e-9)
-    np.testing.assert_allclose(lab.r_cam_gate[:, 0], [0.0, 0.0, 1.0], atol=1e-9)  # passage = forward
+    np.testing.assert_allclose(
+        lab.r_cam_gate[:, 0], [0.0, 0.0, 1.0], atol=1e-9
+    )  # passage = forward
     x, y, w, h = lab.bbox
     assert x < tl[0] and y < tl[1] and x + w > br[0] and y + h > br[1]
 
 
 def test_visible_corners_lie_on_gate_pixels():
     rng = np.random.default_rng(1)
-    gates = tuple(Gate((6.0 * (i + 1), rng.uniform(-2, 2), 2.0), rng.uniform(-30, 30)) for i in range(3))
+    gates = tuple(
+        Gate((6.0 * (i + 1), rng.uniform(-2, 2), 2.0), rng.uniform(-30, 30)) for i in range(3)
+    )
     track = Track("three", gates)
     with Scene(track, Camera()) as scene:
         checked = 0

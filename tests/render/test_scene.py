@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pybullet as p
 import pytest
@@ -15,7 +17,7 @@ from icarus_vision.sim.track import Gate, Track
 LEVEL = np.array([0.0, 0.0, 0.0, 1.0])
 EYE = np.array([0.0, 0.0, 2.0])
 
-RECIPE = "datasets/gates-v1.toml"
+RECIPE = Path(__file__).resolve().parents[2] / "datasets" / "gates-v1.toml"
 
 
 def _is_gate_red(rgb: np.ndarray) -> np.ndarray:
@@ -47,6 +49,9 @@ def test_gate_straight_ahead_lands_where_k_says(one_gate_scene):
 def test_ground_below_and_sky_above_horizon(one_gate_scene):
     frame = one_gate_scene.render(EYE, LEVEL)
     assert frame.seg[0, 0] == SKY_ID and frame.seg[-1, 0] == GROUND_ID
+    sky = np.round(np.multiply(one_gate_scene.style.background.color, 255))
+    np.testing.assert_array_equal(frame.rgb[0, 0], sky)
+    assert frame.rgb[-1, 0, 1] > frame.rgb[-1, 0, 2]  # the default ground is green
     # Bottom row looks down 36.9 deg from 2 m: ground at 2 / tan(36.9) m ahead.
     assert frame.depth[-1, 160] == pytest.approx(2.0 / (120.5 / 160.0), rel=0.02)
 
@@ -61,7 +66,10 @@ def test_gate_flown_twice_is_built_once():
 
 def test_scenes_use_their_own_clients():
     track = Track("one", (Gate((4.0, 0.0, 2.0)),))
-    with Scene(track) as a, Scene(track, distractors=(Distractor("box", (6, 2, 1), (1, 1, 1)),)) as b:
+    with (
+        Scene(track) as a,
+        Scene(track, distractors=(Distractor("box", (6, 2, 1), (1, 1, 1)),)) as b,
+    ):
         assert a.client != b.client
         assert p.getNumBodies(physicsClientId=a.client) == 1
         assert p.getNumBodies(physicsClientId=b.client) == 2
@@ -89,9 +97,19 @@ def test_same_seed_renders_identical_images():
 
 def test_every_distractor_shape_and_shadows_render():
     shapes = ("box", "cylinder", "sphere", "frame", "arch", "pole")
-    ds = tuple(Distractor(s, (6.0, -3.0 + 1.2 * i, 1.0), (0.6, 0.4, 0.1)) for i, s in enumerate(shapes))
+    ds = tuple(
+        Distractor(s, (6.0, -3.0 + 1.2 * i, 1.0), (0.6, 0.4, 0.1)) for i, s in enumerate(shapes)
+    )
     track = Track("one", (Gate((4.0, 0.0, 2.0)),))
     with Scene(track, Camera(hfov_deg=120.0, uptilt_deg=0.0), distractors=ds) as scene:
         frame = scene.render(EYE - [0, 0, 1.0], LEVEL, Lighting(shadows=True))
         seen = set(np.unique(frame.seg)) & set(scene.distractor_bodies)
         assert seen == set(scene.distractor_bodies)
+
+
+def test_egl_request_falls_back_to_tiny_renderer_with_a_warning():
+    with pytest.warns(UserWarning, match="TinyRenderer"):
+        scene = Scene(Track("one", (Gate((4.0, 0.0, 2.0)),)), egl=True)
+    with scene:
+        assert scene.renderer == "tiny"
+        assert scene.render(EYE, LEVEL).rgb.shape == (240, 320, 3)

@@ -1,0 +1,243 @@
+"""A headless PyBullet world built from a Track, and FPV rendering of it.
+
+Every call passes this scene's own ``physicsClientId``; the default client is never used, so many
+scenes (one per dataset worker) can live in one process. Rendering uses TinyRenderer (CPU, no
+display). ``egl=True`` is accepted but falls back to TinyRenderer with a warning (see ``_load_egl``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pybullet as p
+
+from icarus_vision.render.backdrop import paint_backdrop, ray_norms, shade_factor
+from icarus_vision.render.camera import TINY_RENDERER_SAMPLE_OFFSET, Camera
+from icarus_vision.render.meshes import Mesh, box_mesh, frame_mesh, gate_mesh
+from icarus_vision.render.style import DISTRACTOR_SHAPES, Distractor, Frame, Lighting, SceneStyle
+from icarus_vision.render.textures import Material, texture_image
+from icarus_vision.sim.track import Track
+
+__all__ = ["DISTRACTOR_SHAPES", "Distractor", "Frame", "Lighting", "Scene", "SceneStyle"]
+
+
+def _yaw_quat(yaw: float) -> list[float]:
+    return [0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)]
+
+
+class Scene:
+    """A PyBullet DIRECT world holding a track's physical gates, the ground and distractors.
+
+    Attributes:
+        track: the track it was built from.
+        camera: the camera used by :meth:`render`.
+        client: PyBullet physics client id of this scene.
+        gate_bodies: body id of each physical gate, in ``track.physical_gates()`` order.
+        distractor_bodies: body id of each distractor.
+        renderer: ``"tiny"`` (the only renderer for now).
+    """
+
+    def __init__(
+        self,
+        track: Track,
+        camera: Camera | None = None,
+        style: SceneStyle | None = None,
+        distractors: tuple[Distractor, ...] = (),
+        *,
+        egl: bool = False,
+    ) -> None:
+        self.track = track
+        self.camera = camera or Camera()
+        self.style = style or SceneStyle()
+        self.client = p.connect(p.DIRECT)
+        self._tmp = Path(tempfile.mkdtemp(prefix="icarus-render-"))
+        self._textures: dict[str, int] = {}
+        self.renderer = "tiny"
+        try:
+            if egl:
+                self._load_egl()
+            self.gates = track.physical_gates()
+            self.gate_bodies = tuple(self._add_gate(i, g) for i, g in enumerate(self.gates))
+            self.distractor_bodies = tuple(self._add_distractor(d) for d in distractors)
+        except BaseException:
+            self.close()
+            raise
+        self._sky = self._sky_image()
+        self._ground_tex = texture_image(self.style.ground)
+        self._rays: dict[Camera, np.ndarray] = {}
+
+    # -- building ---------------------------------------------------------------------------------
+    def _load_egl(self) -> None:
+        # PyBullet 3.2.x's EGL plugin crashes (SIGSEGV) on in-memory meshes (createVisualShape with
+        # vertices), which every gate here is; until gates are also built from box primitives for
+        # it, asking for EGL falls back to TinyRenderer rather than loading the plugin.
+        warnings.warn(
+            "EGL rendering is not supported for procedural gate meshes yet; using TinyRenderer",
+            stacklevel=3,
+        )
+
+    def _texture(self, material: Material) -> int:
+        key = hashlib.sha1(repr(material).encode()).hexdigest()[:16]
+        if key not in self._textures:
+            path = self._tmp / f"{key}.png"
+            cv2.imwrite(str(path), cv2.cvtColor(texture_image(material), cv2.COLOR_RGB2BGR))
+            self._textures[key] = p.loadTexture(str(path), physicsClientId=self.client)
+        return self._textures[key]
+
+    def _add_mesh(self, mesh: Mesh, material: Material, pos, yaw: float = 0.0) -> int:
+        vis = p.createVisualShape(
+            p.GEOM_MESH,
+            vertices=mesh.vertices.tolist(),
+            indices=mesh.indices.tolist(),
+            normals=mesh.normals.tolist(),
+            uvs=mesh.uvs.tolist(),
+            rgbaColor=material.rgba,
+            physicsClientId=self.client,
+        )
+        body = p.createMultiBody(
+            baseMass=0.0,
+            baseVisualShapeIndex=vis,
+            basePosition=list(map(float, pos)),
+            baseOrientation=_yaw_quat(yaw),
+            physicsClientId=self.client,
+        )
+        self._set_material(body, material)
+        return body
+
+    def _set_material(self, body: int, material: Material) -> None:
+        kw = {"textureUniqueId": self._texture(material)} if material.textured else {}
+        p.changeVisualShape(body, -1, rgbaColor=material.rgba, physicsClientId=self.client, **kw)
+
+    def _add_gate(self, i: int, gate) -> int:
+        mats = self.style.gate_materials
+        mat = mats[i % len(mats)]
+        fw = self.style.frame_width or gate.frame_width
+        return self._add_mesh(gate_mesh(gate.size, fw, mat.tile_m), mat, gate.pos, gate.yaw)
+
+    def _add_distractor(self, d: Distractor) -> int:
+        sx, sy, sz = d.size
+        tile = d.material.tile_m
+        if d.shape in ("frame", "arch"):
+            mesh = frame_mesh(sx, sy, sz, sz, tile, sides=4 if d.shape == "frame" else 3)
+            return self._add_mesh(mesh, d.material, d.pos, math.radians(d.yaw_deg))
+        if d.shape == "box":
+            mesh = box_mesh((0, 0, 0), (sx / 2, sy / 2, sz / 2), tile)
+            return self._add_mesh(mesh, d.material, d.pos, math.radians(d.yaw_deg))
+        if d.shape == "sphere":
+            vis = p.createVisualShape(p.GEOM_SPHERE, radius=sx, physicsClientId=self.client)
+        else:  # cylinder, pole
+            vis = p.createVisualShape(
+                p.GEOM_CYLINDER, radius=sx, length=sz, physicsClientId=self.client
+            )
+        body = p.createMultiBody(
+            0.0, -1, vis, list(map(float, d.pos)), _yaw_quat(math.radians(d.yaw_deg)),
+            physicsClientId=self.client,
+        )  # fmt: skip
+        self._set_material(body, d.material)
+        return body
+
+    def _sky_image(self) -> np.ndarray:
+        bg = self.style.background
+        h, w = self.camera.height, self.camera.width
+        if not bg.textured:
+            return np.broadcast_to(np.round(np.multiply(bg.color, 255)).astype(np.uint8), (h, w, 3))
+        tile_px = max(2, int(round(bg.tile_m)))
+        tile = cv2.resize(texture_image(bg), (tile_px, tile_px), interpolation=cv2.INTER_LINEAR)
+        reps = (h // tile_px + 1, w // tile_px + 1, 1)
+        return np.ascontiguousarray(np.tile(tile, reps)[:h, :w])
+
+    # -- rendering --------------------------------------------------------------------------------
+    def render(
+        self,
+        pos: np.ndarray,
+        quat: np.ndarray,
+        lighting: Lighting | None = None,
+        camera: Camera | None = None,
+    ) -> Frame:
+        """Render the view of a drone at body pose (pos (3,), quat (4,) x, y, z, w).
+
+        Args:
+            pos: (3,) body position, world frame, m.
+            quat: (4,) body attitude, body -> world.
+            lighting: light of this frame (default :class:`Lighting`).
+            camera: overrides the scene's camera for this frame (e.g. jittered FOV or roll).
+
+        Returns:
+            the RGB image, the segmentation mask (body ids) and metric depth.
+        """
+        cam = camera or self.camera
+        light = lighting or Lighting()
+        w, h = cam.width, cam.height
+        renderer, offset = p.ER_TINY_RENDERER, TINY_RENDERER_SAMPLE_OFFSET
+        _, _, rgba, depth, seg = p.getCameraImage(
+            w,
+            h,
+            viewMatrix=cam.view_matrix(pos, quat),
+            projectionMatrix=cam.projection_matrix(offset),
+            lightDirection=list(map(float, light.direction)),
+            lightColor=list(map(float, light.color)),
+            lightDistance=100.0,
+            shadow=int(light.shadows),
+            lightAmbientCoeff=float(light.ambient),
+            lightDiffuseCoeff=float(light.diffuse),
+            lightSpecularCoeff=float(light.specular),
+            renderer=renderer,
+            physicsClientId=self.client,
+        )
+        rgb = np.array(rgba, dtype=np.uint8).reshape(h, w, 4)[..., :3].copy()
+        seg = np.array(seg, dtype=np.int32).reshape(h, w)
+        z = cam.depth_to_z(np.asarray(depth, dtype=np.float32).reshape(h, w)).astype(np.float32)
+        if cam not in self._rays:
+            self._rays[cam] = ray_norms(cam)
+        sky = self._sky
+        if sky.shape[:2] != (h, w):
+            sky = cv2.resize(np.ascontiguousarray(sky), (w, h), interpolation=cv2.INTER_NEAREST)
+        r_wc, t_wc = cam.pose(pos, quat)
+        gain = shade_factor(light.direction, light.color, light.ambient, light.diffuse)
+        paint_backdrop(
+            rgb, seg, z, cam, self._rays[cam], r_wc, t_wc,
+            self._ground_tex, self.style.ground.tile_m, gain, sky,
+        )  # fmt: skip
+        return Frame(rgb, seg, z)
+
+    def gate_index_of_body(self, body: int) -> int | None:
+        """Physical gate index of a body id, None for non-gate bodies."""
+        try:
+            return self.gate_bodies.index(body)
+        except ValueError:
+            return None
+
+    def add_box(self, center, half_extents, color=(0.5, 0.5, 0.5)) -> int:
+        """Add a plain box (an occluder in tests, an obstacle in a scene); returns its body id."""
+        mat = Material("solid", tuple(map(float, color)))
+        return self._add_mesh(box_mesh((0.0, 0.0, 0.0), half_extents, 1.0), mat, center)
+
+    # -- lifetime ---------------------------------------------------------------------------------
+    def close(self) -> None:
+        """Disconnect the PyBullet client and delete the texture files (idempotent)."""
+        if getattr(self, "client", -1) >= 0:
+            try:
+                p.disconnect(physicsClientId=self.client)
+            except p.error:
+                pass
+            self.client = -1
+        shutil.rmtree(getattr(self, "_tmp", ""), ignore_errors=True)
+
+    def __enter__(self) -> Scene:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - safety net only
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001
+            pass

@@ -1,0 +1,91 @@
+"""Descriptions of how a scene looks: materials of gates, ground and sky, distractors, light.
+
+Plain frozen dataclasses, drawn by :mod:`icarus_vision.render.randomize` and consumed by
+:class:`icarus_vision.render.scene.Scene`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from icarus_vision.render.textures import Material
+
+DISTRACTOR_SHAPES = ("box", "cylinder", "sphere", "frame", "arch", "pole")
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Light of one frame (PyBullet's directional light; TinyRenderer honours all of it)."""
+
+    direction: tuple[float, float, float] = (0.4, 0.3, 1.0)
+    """World direction *towards* the light."""
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """Light RGB colour in [0, 1]."""
+    ambient: float = 0.6
+    """Ambient coefficient."""
+    diffuse: float = 0.35
+    """Diffuse coefficient."""
+    specular: float = 0.05
+    """Specular coefficient."""
+    shadows: bool = False
+    """Cast shadows (TinyRenderer shadow map)."""
+
+
+@dataclass(frozen=True)
+class Distractor:
+    """A non-gate object in the world (never labelled)."""
+
+    shape: str
+    """One of ``box``, ``cylinder``, ``sphere``, ``frame`` (closed non-square frame), ``arch``
+    (frame without its bottom bar) or ``pole``."""
+    pos: tuple[float, float, float]
+    """World position of the object's centre, m."""
+    size: tuple[float, float, float]
+    """Extents, m: box x, y, z; cylinder/pole (radius, radius, height); sphere (radius, -, -);
+    frame/arch (opening width, opening height, bar width)."""
+    yaw_deg: float = 0.0
+    """Heading about world z, degrees."""
+    material: Material = field(default_factory=Material)
+    """Surface look."""
+
+    def __post_init__(self) -> None:
+        if self.shape not in DISTRACTOR_SHAPES:
+            raise ValueError(
+                f"distractor shape must be one of {DISTRACTOR_SHAPES}, got {self.shape!r}"
+            )
+
+
+@dataclass(frozen=True)
+class SceneStyle:
+    """How the world looks (everything the domain randomisation varies at build time)."""
+
+    gate_materials: tuple[Material, ...] = (Material("solid", (1.0, 0.35, 0.0)),)
+    """Gate looks; physical gate i uses ``gate_materials[i % len]``."""
+    frame_width: float | None = None
+    """Rendered bar width, m; None keeps each gate's own ``frame_width``."""
+    ground: Material = field(
+        default_factory=lambda: Material("checker", (0.36, 0.5, 0.3), (0.3, 0.44, 0.25), 4.0)
+    )
+    """Ground plane z = 0 look (``tile_m`` in metres)."""
+    background: Material = field(
+        default_factory=lambda: Material("solid", (0.62, 0.76, 0.92), (0.8, 0.85, 0.95), 40.0)
+    )
+    """Sky: painted, in image space, where no object or ground is seen (``tile_m`` in pixels)."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One rendered image.
+
+    Attributes:
+        rgb: (H, W, 3) uint8.
+        seg: (H, W) int32 PyBullet body id per pixel; ``SKY_ID`` (-1) for sky, ``GROUND_ID`` (-2)
+            for ground.
+        depth: (H, W) float32 z along the optical axis, m (about ``camera.far`` for sky).
+    """
+
+    rgb: np.ndarray
+    seg: np.ndarray
+    depth: np.ndarray
