@@ -68,6 +68,10 @@ class EnvConfig:
     """Time limit (truncation); None: 5 s + 3 s per gate passage."""
     gate_obs_frame: str = "world"
     """Frame of obs[12:15], the next gate's relative position: "world" or "body"."""
+    observation: str = "basic"
+    """"basic": the 15-D observation. "extended": 21-D, the 15-D vector plus the next gate's
+    passage direction (unit vector, 15:18) and the relative position of the gate after it (18:21),
+    both in the frame of ``gate_obs_frame``."""
     reward: RewardConfig = field(default_factory=RewardConfig)
     """Reward weights."""
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
@@ -83,8 +87,14 @@ class EnvConfig:
             raise ValueError(
                 f"gate_obs_frame must be 'world' or 'body', got {self.gate_obs_frame!r}"
             )
+        if self.observation not in ("basic", "extended"):
+            raise ValueError(f"observation must be 'basic' or 'extended', got {self.observation!r}")
         if self.num_gates is not None and self.num_gates < 1:
             raise ValueError(f"num_gates must be >= 1, got {self.num_gates}")
+
+    @property
+    def obs_dim(self) -> int:
+        return 15 if self.observation == "basic" else 21
 
     @property
     def substeps(self) -> int:

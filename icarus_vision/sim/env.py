@@ -22,11 +22,11 @@ from icarus_vision.sim.dynamics import QuadState
 from icarus_vision.sim.race_core import OBS_DIM, RaceCore, validate_action
 from icarus_vision.sim.track import Track
 
-OBS_HIGH = np.full(OBS_DIM, 1e4, dtype=np.float32)  # finite so checkers accept it; never reached
+OBS_BOUND = 1e4  # finite so checkers accept it; never reached
 
 
-def observation_space() -> gym.spaces.Box:
-    return gym.spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
+def observation_space(dim: int = OBS_DIM) -> gym.spaces.Box:
+    return gym.spaces.Box(-OBS_BOUND, OBS_BOUND, shape=(dim,), dtype=np.float32)
 
 
 def action_space() -> gym.spaces.Box:
@@ -58,7 +58,7 @@ class DroneRacingEnv(gym.Env):
         super().__init__()
         self.config = make_config(config, **overrides)
         self.core = RaceCore(self.config, 1)
-        self.observation_space = observation_space()
+        self.observation_space = observation_space(self.config.obs_dim)
         self.action_space = action_space()
         self.state = QuadState.zeros(1)
         self._needs_reset = True

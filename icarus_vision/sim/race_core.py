@@ -319,14 +319,21 @@ class RaceCore:
     def observe(self, state: QuadState, rpy: np.ndarray | None = None) -> np.ndarray:
         """(N, 15) float32: pos, vel, rpy, body rates, next gate relative position (world or body).
 
+        With ``observation="extended"``, (N, 21): plus the next gate's passage direction and the
+        relative position of the gate after it (the last gate repeats at the end of the course).
         ``rpy`` (N, 3) may be passed when already computed for this state.
         """
         rpy = quat_to_rpy(state.quat) if rpy is None else rpy
-        gpos, _, _ = self.target_gate()
-        rel = gpos - state.pos
+        gpos, gyaw, _ = self.target_gate()
+        parts = [gpos - state.pos]
+        if self.cfg.observation == "extended":
+            j = np.minimum(self.target + 1, self.n_pass - 1)
+            normal = np.stack((np.cos(gyaw), np.sin(gyaw), np.zeros_like(gyaw)), axis=1)
+            parts += [normal, self.g_pos[np.arange(self.n), j] - state.pos]
         if self.cfg.gate_obs_frame == "body":
-            rel = np.einsum("nji,nj->ni", quat_to_rot(state.quat), rel)
-        return np.concatenate((state.pos, state.vel, rpy, state.omega, rel), axis=1).astype(
+            rot = quat_to_rot(state.quat)
+            parts = [np.einsum("nji,nj->ni", rot, v) for v in parts]
+        return np.concatenate((state.pos, state.vel, rpy, state.omega, *parts), axis=1).astype(
             np.float32
         )
 
@@ -350,4 +357,4 @@ def track_of(core: RaceCore, i: int) -> Track:
     return core.tracks[i]
 
 
-__all__ = ["OBS_DIM", "RaceCore", "validate_action", "jitter_track", "Gate", "track_of"]
+__all__ = ["OBS_DIM", "RaceCore", "validate_action", "jitter_track", "track_of"]

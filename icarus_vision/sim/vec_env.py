@@ -43,7 +43,7 @@ class BatchedRacingVecEnv(VecEnv):
         self.core = RaceCore(self.config, num_envs)
         self.info_mode = info_mode
         self.render_mode = None
-        super().__init__(num_envs, observation_space(), action_space())
+        super().__init__(num_envs, observation_space(self.config.obs_dim), action_space())
         self.state = dynamics.QuadState.zeros(num_envs)
         self._actions: np.ndarray | None = None
         self._seeds: list[int | None] = [None] * num_envs

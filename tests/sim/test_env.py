@@ -223,3 +223,14 @@ def test_gate_relative_obs_wrapper_matches_body_frame_env():
         ob, *_ = body.step(a)
     np.testing.assert_allclose(ow, ob, atol=1e-4)
     assert not np.allclose(ow[12:15], body.core.target_gate()[0][0] - ob[:3])
+
+
+def test_extended_observation():
+    env = BatchedDroneRacingEnv(track="three-gates", observation="extended")
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (21,) and env.observation_space.shape == (21,)
+    g = env.track.gates
+    np.testing.assert_allclose(obs[15:18], g[0].normal, atol=1e-6)
+    np.testing.assert_allclose(obs[18:21], np.array(g[1].pos) - obs[:3], atol=1e-5)
+    vec = BatchedRacingVecEnv(2, track="three-gates", observation="extended")
+    assert vec.reset().shape == (2, 21)

@@ -1,0 +1,69 @@
+"""`icarus-vision train-policy`: PPO on the batched backend with curriculum and randomisation."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from datetime import datetime
+from pathlib import Path
+
+import typer
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from icarus_vision.cli import app, console, user_errors
+
+
+@app.command("train-policy")
+@user_errors
+def train_policy_cmd(
+    config: Path = typer.Option(None, help="Training config TOML (keys of TrainConfig; `preset` picks the base)."),
+    preset: str = typer.Option(None, help="Start from a preset: fast (default) or classic."),
+    timesteps: int = typer.Option(None, min=1, help="Environment steps (default: the config's total_timesteps)."),
+    out: Path = typer.Option(None, help="Run folder (default: runs/policy-<timestamp>/)."),
+    seed: int = typer.Option(0, help="Random seed."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last checkpoint."),
+    error_model: Path = typer.Option(None, help="Detector error model JSON for perception noise."),
+) -> None:
+    """Train a racing policy with PPO (progress bar, TensorBoard logs under OUT/tb, Ctrl-C saves)."""
+    from icarus_vision.policy.config import PRESETS, load_train_config
+    from icarus_vision.policy.train import train_policy
+
+    if config is not None:
+        cfg = load_train_config(config)
+    else:
+        if preset is not None and preset not in PRESETS:
+            raise ValueError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+        cfg = PRESETS[preset or "fast"]
+    if error_model is not None:
+        if not error_model.is_file():
+            raise FileNotFoundError(f"{error_model}: error model file not found")
+        cfg = replace(cfg, perception=replace(cfg.perception, error_model=str(error_model)))
+    if resume and out is None:
+        raise ValueError("--resume needs --out: the run folder to continue")
+    out = out or Path("runs") / f"policy-{datetime.now():%Y%m%d-%H%M%S}"
+    total = timesteps or cfg.total_timesteps
+    console.print(f"training [bold]{cfg.preset}[/] preset for {total:,} steps -> {out}/ (TensorBoard: {out}/tb)")
+    columns = [TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed:,.0f}/{task.total:,.0f}"),
+               TextColumn("{task.fields[rate]} steps/s"), TextColumn("stage {task.fields[stage]} · {task.fields[gates]} gates · success {task.fields[success]}"),
+               TimeElapsedColumn(), TimeRemainingColumn()]  # fmt: skip
+    t0 = time.perf_counter()
+    with Progress(*columns, console=console, transient=False) as bar:
+        task = bar.add_task("PPO", total=total, rate="-", stage=0, gates="-", success="-")
+        last = [0.0]
+
+        def progress(ts: int, curriculum) -> None:
+            now = time.perf_counter()
+            if now - last[0] > 0.5:
+                last[0] = now
+                bar.update(task, completed=ts, rate=f"{ts / max(now - t0, 1e-9):,.0f}", stage=curriculum.stage,
+                           gates=curriculum.num_gates, success=f"{curriculum.success_rate():.0%}")  # fmt: skip
+
+        try:
+            result = train_policy(cfg, out, seed=seed, resume=resume, timesteps=total, progress=progress)
+        except KeyboardInterrupt:
+            console.print(f"interrupted: checkpoint saved; continue with --resume --out {out}")
+            raise
+    console.print(
+        f"done: {result.timesteps:,} steps, curriculum stage {result.stage} ({result.num_gates} gates); "
+        f"policy {result.policy_path}"
+    )

@@ -1,0 +1,120 @@
+"""Configuration of the relative gate pose estimator and of the simulated odometry (frozen)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+MODES = ("map-aided", "map-free")
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    """Simulated odometry: the true state plus white noise and a slowly drifting bias."""
+
+    pos_noise_m: float = 0.005
+    """White noise on each position reading, per axis, m."""
+    vel_noise_mps: float = 0.02
+    """White noise on each velocity reading, per axis, m/s."""
+    att_noise_deg: float = 0.2
+    """White noise on the attitude, a small rotation per axis, degrees."""
+    rate_noise_radps: float = 0.01
+    """White noise on the body rates, per axis, rad/s."""
+    pos_drift_m_per_sqrt_s: float = 0.02
+    """Random-walk density of the position bias, per axis, m/√s (0.02 ⇒ about 9 cm in 20 s)."""
+    yaw_drift_deg_per_sqrt_s: float = 0.1
+    """Random-walk density of the heading bias, degrees/√s."""
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (value >= 0 and value < float("inf")):
+                raise ValueError(f"OdometryConfig.{name} must be finite and >= 0, got {value}")
+
+
+@dataclass(frozen=True)
+class MeasurementConfig:
+    """Per-detection checks and the measurement noise model of PnP."""
+
+    pixel_sigma: float = 1.0
+    """Corner error of the detector, pixels (one σ per coordinate); drives the PnP covariance."""
+    cov_scale: float = 1.5
+    """Inflation of the first-order PnP covariance (model errors, non-Gaussian detector errors)."""
+    min_sigma_m: float = 0.01
+    """Floor of the position standard deviation of one measurement, per axis, m."""
+    odometry_att_sigma_deg: float = 0.3
+    """Attitude error of the odometry at a frame, degrees; its lever arm is the gate distance."""
+    min_side_px: float = 4.0
+    """Smallest mean side of the corner quadrilateral accepted, pixels."""
+    min_area_ratio: float = 0.05
+    """Smallest area of any corner triangle relative to the quadrilateral's area (collinearity)."""
+    image_margin_px: float = 0.5
+    """How far outside the image a corner may lie before the detection is rejected, pixels."""
+    max_range_m: float = 40.0
+    """Detections solved farther than this are rejected, m."""
+    tilt_sigma_deg: float = 10.0
+    """Prior spread of a gate's tilt from vertical, used to choose between the two PnP solutions."""
+    ambiguity_gap: float = 30.0
+    """The second PnP solution is dropped when its cost (reprojection χ² + tilt) exceeds the best
+    one's by more than this; otherwise the gate's heading estimate decides between them."""
+
+    def __post_init__(self) -> None:
+        if not self.pixel_sigma > 0:
+            raise ValueError(f"pixel_sigma must be > 0, got {self.pixel_sigma}")
+        if not self.cov_scale > 0:
+            raise ValueError(f"cov_scale must be > 0, got {self.cov_scale}")
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """The Kalman filter on each gate's position and heading (odometry world frame)."""
+
+    pos_process_m_per_sqrt_s: float = 0.05
+    """Random-walk density of a gate's position in the odometry frame (odometry drift), m/√s."""
+    yaw_process_deg_per_sqrt_s: float = 0.5
+    """Random-walk density of a gate's heading in the odometry frame, degrees/√s."""
+    gate_chi2: float = 18.5
+    """Mahalanobis gate on the 4-D innovation (χ², 4 dof: 18.5 ⇒ p = 0.999)."""
+    reinit_count: int = 3
+    """Rejected but mutually consistent measurements that re-initialise a gate (wrong prior)."""
+    reinit_window_s: float = 0.5
+    """Time window in which those rejected measurements must fall, s."""
+    reinit_radius_m: float = 3.0
+    """A re-initialised gate may move at most this far from its previous estimate, m."""
+    passage_margin: float = 1.0
+    """A passage counts when the drone crosses the gate plane within size/2 · (1 + margin) of its
+    centre (the estimate and odometry are not exact)."""
+    new_gate_sigma_scale: float = 2.0
+    """Map-free: a gate first seen starts with its measurement covariance scaled by this."""
+    confirm_hits: int = 2
+    """Map-free: updates before a newly seen gate may become the target."""
+
+    def __post_init__(self) -> None:
+        if self.reinit_count < 2:
+            raise ValueError(f"reinit_count must be >= 2, got {self.reinit_count}")
+        if not self.gate_chi2 > 0:
+            raise ValueError(f"gate_chi2 must be > 0, got {self.gate_chi2}")
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """The relative gate pose estimator."""
+
+    mode: str = "map-aided"
+    """``map-aided`` (a prior map, corrected by vision) or ``map-free`` (gates found by vision)."""
+    map_sigma_m: float = 0.5
+    """Map-aided: trusted error of the prior map's gate positions, per axis, m."""
+    map_yaw_sigma_deg: float = 10.0
+    """Map-aided: trusted error of the prior map's gate headings, degrees."""
+    gate_size: float = 1.0
+    """Map-free: side of the gates' square opening, m (map-aided takes each gate's own size)."""
+    measurement: MeasurementConfig = field(default_factory=MeasurementConfig)
+    """Per-detection checks and PnP noise model."""
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    """Filter parameters."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(
+                f"unknown estimator mode {self.mode!r}; choose one of {', '.join(MODES)}"
+            )
+        if not (self.map_sigma_m > 0 and self.map_yaw_sigma_deg > 0 and self.gate_size > 0):
+            raise ValueError("map_sigma_m, map_yaw_sigma_deg and gate_size must be > 0")

@@ -1,0 +1,373 @@
+"""The relative gate pose estimator: detections + odometry -> where the next gate is, with covariance.
+
+Each camera frame, every detection is checked (degenerate corners are rejected and counted), solved
+by square PnP (both solutions kept), expressed in the odometry world frame through the camera mount
+and the odometry pose, and associated with the gate track that explains it best (Mahalanobis
+distance, the two PnP solutions both tried); the winner updates that gate's Kalman filter. Between
+frames the filters only grow their covariance. The next gate is switched when odometry crosses its
+estimated plane through its opening.
+
+* **map-aided**: one gate track per physical gate of a prior map (which may be displaced from the
+  real gates); the next gate is the next passage of the map. Detections that fit no gate are
+  outliers; several mutually consistent outliers re-initialise the nearest gate (a wrong prior).
+* **map-free**: gate tracks are created from detections; the next gate is the nearest confirmed gate
+  ahead of the drone that has not been passed.
+
+The estimator never sees the true gates: only the prior map, the detections and odometry.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+
+import numpy as np
+
+from icarus_vision.estimator.config import EstimatorConfig
+from icarus_vision.estimator.estimate import NO_GATE_DISTANCE, NO_GATE_SIGMA, GateEstimate
+from icarus_vision.estimator.filter import (
+    GateTrack,
+    batch_mahalanobis_sq,
+    process_noise,
+    widen_heading,
+)
+from icarus_vision.estimator.odometry import OdometryReading, check_odometry
+from icarus_vision.estimator.pnp import (
+    PnPSolution,
+    check_corners,
+    measure_candidates,
+    measurement_covariance,
+    pose_covariance,
+    scale_covariance,
+    to_measurement,
+    wrap_axis,
+)
+from icarus_vision.gate_detect.base import GateDetection
+from icarus_vision.render.camera import Camera
+from icarus_vision.sim.dynamics import quat_to_rot
+from icarus_vision.sim.track import SAME_GATE_TOL, Track
+
+
+class GateEstimator:
+    """Filters detections into the next gate's relative position (see the module docstring).
+
+    Args:
+        camera: the camera model (K and mount) that took the images.
+        config: estimator configuration.
+        prior: the prior map (required in map-aided mode, ignored in map-free mode).
+    """
+
+    def __init__(
+        self, camera: Camera, config: EstimatorConfig | None = None, prior: Track | None = None
+    ) -> None:
+        self.camera = camera
+        self.config = config or EstimatorConfig()
+        if self.config.mode == "map-aided" and prior is None:
+            raise ValueError("map-aided mode needs a prior map (a Track); use mode='map-free'")
+        self.prior = prior if self.config.mode == "map-aided" else None
+        self._k = camera.K
+        self._r_body_cam = camera.r_body_cam
+        self._q = process_noise(self.config.filter)
+        self.reset()
+
+    # -- state ----------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget everything (a new race)."""
+        self.counts: Counter[str] = Counter()
+        self.tracks: list[GateTrack] = []
+        self.passage_gate: list[int] = []  # map-aided: gate track of each passage
+        self.passage_yaw: list[float] = []  # map-aided: prior heading of each passage
+        self.target = 0
+        self._target_gate = -1  # map-free
+        self._target_heading = 0.0
+        self._last_passed = -1
+        self._passed: set[int] = set()
+        self._odom: OdometryReading | None = None
+        self._rejected: deque = deque()
+        if self.prior is not None:
+            self._load_prior(self.prior)
+
+    def _load_prior(self, prior: Track) -> None:
+        c = self.config
+        cov = np.diag([c.map_sigma_m**2] * 3 + [math.radians(c.map_yaw_sigma_deg) ** 2])
+        for g in prior.passages:
+            found = [
+                i
+                for i, tr in enumerate(self.tracks)
+                if np.linalg.norm(tr.pos - np.asarray(g.pos)) < SAME_GATE_TOL
+            ]
+            if not found:
+                self.tracks.append(GateTrack(np.array(g.pos), g.yaw, cov, g.size, 0.0, True))
+                found = [len(self.tracks) - 1]
+            self.passage_gate.append(found[0])
+            self.passage_yaw.append(g.yaw)
+
+    # -- public API ---------------------------------------------------------------------------
+    def predict(self, odom: OdometryReading) -> GateEstimate:
+        """Advance to a new odometry reading without a camera frame.
+
+        Raises:
+            ValueError: non-finite odometry.
+        """
+        self._advance(odom)
+        return self._estimate(measured=False)
+
+    def update(self, odom: OdometryReading, detections: list[GateDetection]) -> GateEstimate:
+        """Advance to ``odom`` (the pose at which the image was taken) and fuse its detections.
+
+        Raises:
+            ValueError: non-finite odometry.
+        """
+        self._advance(odom)
+        measured = self._fuse(odom, detections)
+        return self._estimate(measured=measured)
+
+    # -- prediction and gate switching ---------------------------------------------------------
+    def _advance(self, odom: OdometryReading) -> None:
+        check_odometry(odom)
+        prev = self._odom
+        dt = 0.0 if prev is None else max(odom.t - prev.t, 0.0)
+        if dt > 0:
+            q_dt = self._q * dt
+            for tr in self.tracks:
+                tr.add_noise(q_dt)
+        if prev is not None:
+            self._check_passage(prev.pos, odom.pos)
+        self._odom = odom
+        if self.config.mode == "map-free":
+            self._prune(odom.t)
+            self._select_target(odom)
+
+    def _target_track(self) -> int:
+        if self.config.mode == "map-aided":
+            return self.passage_gate[min(self.target, len(self.passage_gate) - 1)]
+        return self._target_gate
+
+    def _heading(self, gate: int) -> float:
+        """Passage heading of a gate track: its axis turned toward the expected direction."""
+        ref = (
+            self.passage_yaw[min(self.target, len(self.passage_yaw) - 1)]
+            if self.config.mode == "map-aided"
+            else self._target_heading
+        )
+        axis = self.tracks[gate].mean[3]
+        return float(ref + wrap_axis(axis - ref))
+
+    def _check_passage(self, p0: np.ndarray, p1: np.ndarray) -> None:
+        gi = self._target_track()
+        if gi < 0 or (self.config.mode == "map-aided" and self.target >= len(self.passage_gate)):
+            return
+        tr = self.tracks[gi]
+        yaw = self._heading(gi)
+        n = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        s0, s1 = float((p0 - tr.pos) @ n), float((p1 - tr.pos) @ n)
+        if not (s0 < 0.0 <= s1):
+            return
+        cross = p0 + (p1 - p0) * (s0 / (s0 - s1)) - tr.pos
+        reach = 0.5 * tr.size * (1.0 + self.config.filter.passage_margin)
+        if np.max(np.abs(cross - (cross @ n) * n)) > reach:
+            return
+        self.counts["passages"] += 1
+        self.target += 1
+        if self.config.mode == "map-free":
+            self._passed.add(gi)
+            self._last_passed = gi
+            self._target_gate = -1
+
+    def _prune(self, t: float) -> None:
+        """Map-free: drop gates seen once and never confirmed within a second."""
+        hits = self.config.filter.confirm_hits
+        keep = [
+            i
+            for i, tr in enumerate(self.tracks)
+            if tr.hits >= hits or t - tr.created_t < 1.0 or i == self._target_gate
+        ]
+        # Two tracks of one gate (its first sightings were too far apart): keep the older one.
+        for a in list(keep):
+            for b in keep:
+                if b < a and np.linalg.norm(self.tracks[a].pos - self.tracks[b].pos) < 0.5 * (
+                    self.tracks[a].size
+                ):
+                    if a != self._target_gate:
+                        keep.remove(a)
+                    break
+        if len(keep) == len(self.tracks):
+            return
+        remap = {old: new for new, old in enumerate(keep)}
+        self.tracks = [self.tracks[i] for i in keep]
+        self._target_gate = remap.get(self._target_gate, -1)
+        self._last_passed = remap.get(self._last_passed, -1)
+        self._passed = {remap[i] for i in self._passed if i in remap}
+
+    def _select_target(self, odom: OdometryReading) -> None:
+        """Map-free: the nearest confirmed gate ahead that has not been passed (sticky)."""
+        fwd = quat_to_rot(odom.quat[None])[0][:, 0]
+        fwd = np.array([fwd[0], fwd[1], 0.0]) / max(math.hypot(fwd[0], fwd[1]), 1e-9)
+        best, best_d = -1, math.inf
+        pool = [i for i, tr in enumerate(self.tracks) if tr.hits >= self.config.filter.confirm_hits]
+        if pool and all(i in self._passed for i in pool):
+            self._passed = {self._last_passed}  # a new lap: every gate but the last is ahead again
+        for i in pool:
+            d = self.tracks[i].pos - odom.pos
+            dist = float(np.linalg.norm(d))
+            if i in self._passed or d @ fwd <= 0.0 or dist < 0.3:
+                continue
+            if dist < best_d:
+                best, best_d = i, dist
+        cur = self._target_gate
+        if best < 0 or best == cur:
+            return
+        if cur >= 0 and best_d > 0.7 * float(np.linalg.norm(self.tracks[cur].pos - odom.pos)):
+            return
+        self._target_gate = best
+        d = self.tracks[best].pos - odom.pos
+        axis = self.tracks[best].mean[3]
+        # Face away from the drone: the passage direction points from the drone through the gate.
+        self._target_heading = (
+            axis if math.cos(axis) * d[0] + math.sin(axis) * d[1] >= 0 else axis + math.pi
+        )
+
+    # -- measurement update --------------------------------------------------------------------
+    def _fuse(self, odom: OdometryReading, detections: list[GateDetection]) -> bool:
+        c = self.config
+        mcfg = c.measurement
+        r_wc = quat_to_rot(odom.quat[None] / np.linalg.norm(odom.quat))[0] @ self._r_body_cam
+        t_wc = odom.pos
+        pairs = []  # (score, detection index, track index, measurement)
+        means = np.array([tr.mean for tr in self.tracks]).reshape(-1, 4)
+        covs = np.array([tr.cov for tr in self.tracks]).reshape(-1, 4, 4)
+        track_size = np.array([tr.size for tr in self.tracks])
+        sizes = sorted(set(track_size.tolist()))
+        sigma = mcfg.pixel_sigma
+        unmatched = []
+        for di, det in enumerate(detections):
+            self.counts["detections"] += 1
+            reason = check_corners(det.corners, self.camera.width, self.camera.height, mcfg)
+            if reason is not None:
+                self.counts[f"rejected_{reason}"] += 1
+                continue
+            sols, costs = measure_candidates(det.corners, 1.0, self._k, r_wc, t_wc, mcfg)
+            if not sols:
+                self.counts["rejected_pnp_failed"] += 1
+                continue
+            if np.linalg.norm(sols[0].t_cam_gate) * self._size_guess() > mcfg.max_range_m:
+                self.counts["rejected_range"] += 1
+                continue
+            cov6 = pose_covariance(self._k, sols[0].r_cam_gate, sols[0].t_cam_gate, 1.0, sigma)
+            best = None
+            for size in sizes:
+                idx = np.flatnonzero(track_size == size)
+                ms = self._measurements(sols, costs, cov6, size, r_wc, t_wc)
+                d2 = batch_mahalanobis_sq(means[idx], covs[idx], ms)  # (solutions, gates)
+                score = d2 + (costs - costs[0])[:, None]
+                k, j = np.unravel_index(int(np.argmin(score)), score.shape)
+                if best is None or score[k, j] < best[0]:
+                    m = ms[k]
+                    if len(ms) == 2:  # the other solution is still plausible: widen the heading
+                        m = widen_heading(m, ms[1 - k], float(score[1 - k, j] - score[k, j]))
+                    best = (float(score[k, j]), float(d2[k, j]), int(idx[j]), m)
+            if best is not None and best[1] <= c.filter.gate_chi2:
+                pairs.append((best[0], di, best[2], best[3]))
+            else:
+                size = self._size_guess()
+                ms = self._measurements(sols, costs, cov6, size, r_wc, t_wc)
+                m = (
+                    ms[0]
+                    if len(ms) == 1
+                    else widen_heading(ms[0], ms[1], float(costs[1] - costs[0]))
+                )
+                unmatched.append(m)
+        measured = False
+        used: set[int] = set()
+        for _, _, ti, m in sorted(pairs, key=lambda p: p[0]):
+            if ti in used:
+                self.counts["duplicates"] += 1
+                continue
+            used.add(ti)
+            self.tracks[ti].update(m, odom.t)
+            self.counts["accepted"] += 1
+            measured |= ti == self._target_track()
+        for m in unmatched:
+            self._unmatched(m, odom.t)
+        return measured
+
+    def _measurements(self, sols, costs, cov6, size: float, r_wc, t_wc) -> list:
+        """World-frame measurements of unit-size PnP solutions scaled to a gate of ``size``.
+
+        Both solutions share the covariance of the best one (they differ by a small flip).
+        """
+        mcfg = self.config.measurement
+        dist = size * math.sqrt(float(sols[0].t_cam_gate @ sols[0].t_cam_gate))
+        cov = measurement_covariance(scale_covariance(cov6, size), dist, r_wc, mcfg)
+        out = []
+        for sol, cost in zip(sols, costs, strict=True):
+            scaled = PnPSolution(sol.r_cam_gate, sol.t_cam_gate * size, sol.sq_err)
+            out.append(to_measurement(scaled, cov, r_wc, t_wc, float(cost)))
+        return out
+
+    def _size_guess(self) -> float:
+        return (
+            self.tracks[0].size if self.prior is not None and self.tracks else self.config.gate_size
+        )
+
+    def _unmatched(self, m, t: float) -> None:
+        """A detection no gate explains: an outlier, a wrong prior, or (map-free) a new gate."""
+        fc = self.config.filter
+        if self.config.mode == "map-free":
+            cov = m.cov * fc.new_gate_sigma_scale**2
+            self.tracks.append(GateTrack(m.pos, m.yaw, cov, self.config.gate_size, t, False))
+            self.tracks[-1].hits = 1
+            self.counts["new_gates"] += 1
+            return
+        self.counts["outliers"] += 1
+        self._rejected.append((t, m))
+        while self._rejected and t - self._rejected[0][0] > fc.reinit_window_s:
+            self._rejected.popleft()
+        agree = [
+            o
+            for _, o in self._rejected
+            if (d := o.pos - m.pos) @ np.linalg.solve(o.cov[:3, :3] + m.cov[:3, :3], d)
+            <= fc.gate_chi2
+        ]
+        if len(agree) < fc.reinit_count:
+            return
+        dists = [float(np.linalg.norm(tr.pos - m.pos)) for tr in self.tracks]
+        ti = int(np.argmin(dists))
+        # Only a gate that vision has not confirmed lately is moved: a persistent false detection
+        # next to a gate that is being measured well stays an outlier.
+        if dists[ti] <= fc.reinit_radius_m and t - self.tracks[ti].last_hit_t > fc.reinit_window_s:
+            self.tracks[ti].reinit(m, t)
+            self.counts["reinit"] += 1
+            self._rejected.clear()
+
+    # -- output ---------------------------------------------------------------------------------
+    def _estimate(self, measured: bool) -> GateEstimate:
+        odom = self._odom
+        r_wb = quat_to_rot(odom.quat[None] / np.linalg.norm(odom.quat))[0]
+        gi = self._target_track()
+        if gi < 0:
+            rel_body = np.array([NO_GATE_DISTANCE, 0.0, 0.0])
+            cov_body = NO_GATE_SIGMA**2 * np.eye(3)
+            rel_world = r_wb @ rel_body
+            return GateEstimate(
+                odom.t, self.target, -1, False, rel_world, rel_body, cov_body.copy(), cov_body,
+                odom.pos + rel_world, math.atan2(r_wb[1, 0], r_wb[0, 0]), math.pi, False, math.inf,
+            )  # fmt: skip
+        tr = self.tracks[gi]
+        rel_world = tr.pos - odom.pos
+        cov_world = tr.cov[:3, :3].copy()
+        return GateEstimate(
+            t=odom.t,
+            target=self.target,
+            gate=gi,
+            valid=True,
+            rel_world=rel_world,
+            rel_body=r_wb.T @ rel_world,
+            cov_world=cov_world,
+            cov_body=r_wb.T @ cov_world @ r_wb,
+            gate_pos=tr.pos.copy(),
+            yaw=self._heading(gi),
+            yaw_sigma=math.sqrt(tr.cov[3, 3]),
+            measured=measured,
+            since_seen_s=odom.t - tr.last_hit_t,
+        )

@@ -1,0 +1,229 @@
+"""Training configuration: frozen dataclasses loaded from TOML, with the `classic` and `fast` presets."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
+from pathlib import Path
+
+from icarus_vision.sim.config import RandomizationConfig, RewardConfig
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """stable-baselines3 PPO hyperparameters (rollout size = num_envs × n_steps)."""
+
+    num_envs: int = 256
+    """Drones simulated together in one BatchedRacingVecEnv."""
+    n_steps: int = 64
+    """Steps per drone per rollout."""
+    batch_size: int = 4096
+    """Minibatch size."""
+    n_epochs: int = 8
+    """Passes over each rollout."""
+    learning_rate: float = 1e-3
+    """Adam learning rate."""
+    gamma: float = 0.99
+    """Discount factor."""
+    gae_lambda: float = 0.95
+    """GAE λ."""
+    clip_range: float = 0.2
+    """PPO clipping."""
+    ent_coef: float = 0.0
+    """Entropy bonus."""
+    vf_coef: float = 0.5
+    """Value-loss weight."""
+    max_grad_norm: float = 0.5
+    """Gradient clipping."""
+    net_arch: tuple[int, ...] = (64, 64)
+    """Hidden layers of the policy and value MLPs (separate networks)."""
+    log_std_init: float = 0.0
+    """Initial log standard deviation of the Gaussian policy."""
+    advantage_norm: str = "minibatch"
+    """"minibatch" (SB3's per-minibatch normalisation) or "running" (Welford statistics over all
+    rollouts so far, applied to whole rollouts)."""
+    torch_threads: int = 1
+    """Torch intra-op threads (the simulator runs on the other core)."""
+
+
+@dataclass(frozen=True)
+class CurriculumConfig:
+    """Gate-count curriculum on random tracks."""
+
+    stages: tuple[int, ...] = (1, 3, 5, 10)
+    """Gates per episode at each stage."""
+    promote_success: float = 0.8
+    """Success rate (all gates, no crash) over the window needed to promote."""
+    window: int = 100
+    """Episodes in the success window."""
+    min_episodes: int = 20
+    """Episodes at a stage before a promotion is considered."""
+
+
+@dataclass(frozen=True)
+class PerceptionNoiseConfig:
+    """Noise on obs[12:15] standing in for the vision pipeline during training."""
+
+    enabled: bool = True
+    """Apply perception noise."""
+    error_model: str | None = None
+    """Detector error model JSON (from eval-detector); None: the parametric default below."""
+    sigma_base_m: float = 0.02
+    """Position noise standard deviation at zero distance, m."""
+    sigma_per_m: float = 0.015
+    """Growth of the standard deviation per metre of distance."""
+    miss_base: float = 0.05
+    """Probability of a missed detection at zero distance (the last estimate is held)."""
+    miss_per_m: float = 0.01
+    """Growth of the miss probability per metre."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything `train-policy` needs."""
+
+    preset: str = "fast"
+    """Name of the preset this config started from."""
+    total_timesteps: int = 20_000_000
+    """Environment steps to train for."""
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    """PPO hyperparameters."""
+    curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
+    """Gate-count curriculum."""
+    randomization: RandomizationConfig = field(default_factory=lambda: RandomizationConfig(enabled=True))
+    """Domain randomisation (on by default for training)."""
+    perception: PerceptionNoiseConfig = field(default_factory=PerceptionNoiseConfig)
+    """Perception noise on the gate observation."""
+    reward: str = "progress"
+    """"progress" (the simulation core's reward) or "racing" (adds speed toward the gate and a
+    time penalty)."""
+    observation: str = "basic"
+    """"basic" (15-D) or "extended" (21-D: adds the next gate's direction and the gate after)."""
+    max_episode_s: float | None = None
+    """Episode time limit; None: the environment default (5 s + 3 s per gate)."""
+    checkpoint_every: int = 1_000_000
+    """Environment steps between checkpoints."""
+    eval_every: int = 1_000_000
+    """Environment steps between evaluations for the best model."""
+    eval_episodes: int = 64
+    """Episodes per evaluation (random tracks at the current curriculum stage)."""
+
+    def __post_init__(self) -> None:
+        validate_train_config(self)
+
+    def reward_config(self) -> RewardConfig:
+        if self.reward == "progress":
+            return RewardConfig()
+        return RewardConfig(speed=0.5, time=-1.0)
+
+
+def validate_train_config(c: TrainConfig) -> None:
+    """Raise ValueError naming the first out-of-range value."""
+    p = c.ppo
+    checks = [
+        ("total_timesteps", c.total_timesteps >= 1),
+        ("ppo.num_envs", p.num_envs >= 1),
+        ("ppo.n_steps", p.n_steps >= 1),
+        ("ppo.batch_size", 1 <= p.batch_size <= p.num_envs * p.n_steps),
+        ("ppo.n_epochs", p.n_epochs >= 1),
+        ("ppo.learning_rate", 0 < p.learning_rate < 1),
+        ("ppo.gamma", 0 < p.gamma <= 1),
+        ("ppo.gae_lambda", 0 <= p.gae_lambda <= 1),
+        ("ppo.clip_range", 0 < p.clip_range < 1),
+        ("ppo.ent_coef", p.ent_coef >= 0),
+        ("ppo.net_arch", len(p.net_arch) >= 1 and all(n >= 1 for n in p.net_arch)),
+        ("ppo.advantage_norm", p.advantage_norm in ("minibatch", "running")),
+        ("ppo.torch_threads", p.torch_threads >= 1),
+        ("curriculum.stages", len(c.curriculum.stages) >= 1 and all(n >= 1 for n in c.curriculum.stages)),
+        ("curriculum.promote_success", 0 < c.curriculum.promote_success <= 1),
+        ("curriculum.window", c.curriculum.window >= 1),
+        ("curriculum.min_episodes", 1 <= c.curriculum.min_episodes),
+        ("reward", c.reward in ("progress", "racing")),
+        ("observation", c.observation in ("basic", "extended")),
+        ("checkpoint_every", c.checkpoint_every >= 1),
+        ("eval_every", c.eval_every >= 1),
+        ("eval_episodes", c.eval_episodes >= 1),
+    ]
+    for name, ok in checks:
+        if not ok:
+            raise ValueError(f"train config: {name} is out of range ({_get(c, name)!r})")
+    for sub in (c.ppo, c.randomization, c.perception):
+        for f in fields(sub):
+            v = getattr(sub, f.name)
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"train config: {f.name} must be finite, got {v}")
+
+
+def _get(obj, dotted: str):
+    for part in dotted.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+CLASSIC = TrainConfig(
+    preset="classic",
+    ppo=PPOConfig(
+        num_envs=8,
+        n_steps=256,  # 8 × 256 = the classic 2048-step rollout
+        batch_size=64,
+        n_epochs=10,
+        learning_rate=3e-4,
+        gamma=0.99,
+        gae_lambda=0.95,
+        clip_range=0.2,
+        ent_coef=0.01,
+        net_arch=(64, 64),
+    ),
+)
+FAST = TrainConfig(preset="fast")
+PRESETS = {"classic": CLASSIC, "fast": FAST}
+
+
+def _from_table(cls, table: dict, where: str):
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: expected a table")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(table) - set(known))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(known)}")
+    return table
+
+
+def config_from_dict(data: dict, source: str = "<memory>") -> TrainConfig:
+    """A TrainConfig from a parsed TOML table: ``preset`` picks the base, other keys override it."""
+    data = dict(_from_table(TrainConfig, data, source))
+    preset = data.pop("preset", "fast")
+    if preset not in PRESETS:
+        raise ValueError(f"{source}: unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
+    base = PRESETS[preset]
+    kwargs = {}
+    for key, value in data.items():
+        current = getattr(base, key)
+        if is_dataclass(current):
+            table = _from_table(type(current), value, f"{source} [{key}]")
+            table = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
+            kwargs[key] = replace(current, **table)
+        else:
+            kwargs[key] = value
+    try:
+        return replace(base, **kwargs)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{source}: {e}") from None
+
+
+def load_train_config(path: str | Path) -> TrainConfig:
+    """Load a training config TOML; errors name the file and the key."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: config file not found")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{path}: not a valid TOML file ({e})") from None
+    return config_from_dict(data, str(path))
+
+
+def config_to_dict(c: TrainConfig) -> dict:
+    """JSON-friendly dict of a config (tuples become lists)."""
+    return asdict(c)

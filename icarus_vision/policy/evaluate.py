@@ -1,0 +1,133 @@
+"""Evaluate a pilot (an exported policy or the scripted controller) over many episodes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from icarus_vision.policy.callbacks import episode_success
+from icarus_vision.policy.export import ExportedPolicy
+from icarus_vision.policy.scripted import ScriptedController
+from icarus_vision.sim.builtin import resolve_track
+from icarus_vision.sim.config import EnvConfig, RandomizationConfig
+from icarus_vision.sim.registration import make_env
+from icarus_vision.sim.vec_env import BatchedRacingVecEnv
+
+
+def _pilot(policy: ExportedPolicy | str, env):
+    if isinstance(policy, ExportedPolicy):
+        return lambda obs: policy.act(obs)
+    if policy == "scripted":
+        ctrl = ScriptedController(env.config.quad if hasattr(env, "config") else None)
+        return lambda obs: ctrl.act_env(env, obs)
+    raise ValueError(f"unknown policy {policy!r}")
+
+
+def _summary(episodes: list[dict]) -> dict:
+    ok = [e for e in episodes if e["success"]]
+    laps = np.array([e["lap_time"] for e in ok]) if ok else np.array([])
+    reasons: dict[str, int] = {}
+    for e in episodes:
+        if e["crash_reason"]:
+            reasons[e["crash_reason"]] = reasons.get(e["crash_reason"], 0) + 1
+    pct = (lambda q: round(float(np.percentile(laps, q)), 3)) if laps.size else (lambda q: None)
+    return {
+        "episodes": len(episodes),
+        "success_rate": round(len(ok) / len(episodes), 4),
+        "crash_rate": round(sum(e["crashed"] for e in episodes) / len(episodes), 4),
+        "crash_reasons": reasons,
+        "mean_gates_passed": round(float(np.mean([e["gates_passed"] for e in episodes])), 3),
+        "lap_time_s": {"median": pct(50), "p10": pct(10), "p90": pct(90)},
+        "max_speed_mps": round(float(max(e["max_speed"] for e in episodes)), 3),
+        "mean_speed_mps": round(float(np.mean([e["mean_speed"] for e in episodes])), 3),
+    }
+
+
+def evaluate_policy(
+    policy: ExportedPolicy | str,
+    track: str | None = None,
+    *,
+    episodes: int = 100,
+    num_gates: int = 10,
+    backend: str = "batched",
+    randomize: bool = False,
+    seed: int = 0,
+) -> dict:
+    """Fly ``episodes`` episodes and report success, crashes, gates, lap times and speeds.
+
+    Args:
+        policy: an ExportedPolicy or "scripted".
+        track: a built-in name or TOML path; None flies random tracks of ``num_gates`` gates (one
+            new track per episode, seeded).
+        backend: "batched" (all episodes at once, one drone each) or "pybullet" (one after another).
+        randomize: domain randomisation (mass, thrust, wind, gate jitter).
+
+    Returns:
+        The eval-policy JSON fields of ARCHITECTURE.md plus crash reasons and mean speed.
+    """
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    obs_mode = policy.observation if isinstance(policy, ExportedPolicy) else "basic"
+    base = None if track is None else resolve_track(track)
+    cfg = EnvConfig(
+        track=base, random_tracks=base is None, num_gates=num_gates if base is None else None,
+        randomization=RandomizationConfig(enabled=randomize), observation=obs_mode,
+    )  # fmt: skip
+    if backend == "batched":
+        results = _run_batched(policy, cfg, episodes, seed)
+    elif backend == "pybullet":
+        results = _run_sequential(policy, cfg, episodes, seed)
+    else:
+        raise ValueError(f"unknown backend {backend!r}; choose batched or pybullet")
+    name = policy.name if isinstance(policy, ExportedPolicy) else policy
+    track_name = base.name if base is not None else f"random-{num_gates}"
+    return {"policy": name, "track": track_name, "backend": backend, "randomize": randomize,
+            "seed": seed, **_summary(results)}  # fmt: skip
+
+
+def _episode(info: dict, speeds: list[float]) -> dict:
+    return {
+        "success": episode_success(info), "crashed": bool(info["crashed"]),
+        "crash_reason": info["crash_reason"], "gates_passed": info["gates_passed"],
+        "lap_time": info["time"], "max_speed": max(speeds), "mean_speed": float(np.mean(speeds)),
+    }  # fmt: skip
+
+
+def _run_batched(policy, cfg: EnvConfig, episodes: int, seed: int) -> list[dict]:
+    env = BatchedRacingVecEnv(episodes, cfg)
+    env.seed(seed)
+    obs = env.reset()
+    act = _pilot(policy, env)
+    results: list[dict | None] = [None] * episodes
+    speed_sum, speed_max, steps = np.zeros(episodes), np.zeros(episodes), np.zeros(episodes)
+    while any(r is None for r in results):
+        obs, _, done, infos = env.step(act(obs))
+        v = np.linalg.norm(env.state.vel, axis=1)
+        live = np.array([r is None for r in results])
+        speed_sum += v * live
+        speed_max = np.where(live, np.maximum(speed_max, v), speed_max)
+        steps += live
+        for i in np.flatnonzero(done):
+            if results[i] is None:
+                r = _episode(infos[i], [0.0])
+                r["max_speed"], r["mean_speed"] = float(speed_max[i]), float(speed_sum[i] / steps[i])
+                results[i] = r
+    return results  # type: ignore[return-value]
+
+
+def _run_sequential(policy, cfg: EnvConfig, episodes: int, seed: int) -> list[dict]:
+    env = make_env("pybullet", config=cfg)
+    act = _pilot(policy, env)
+    results = []
+    try:
+        for k in range(episodes):
+            obs, _ = env.reset(seed=seed + k)
+            speeds = []
+            while True:
+                obs, _, term, trunc, info = env.step(act(obs[None])[0])
+                speeds.append(float(np.linalg.norm(obs[3:6])))
+                if term or trunc:
+                    break
+            results.append(_episode(info, speeds))
+    finally:
+        env.close()
+    return results

@@ -1,0 +1,139 @@
+"""Exported policies: an MLP in safetensors plus a JSON description, loaded without pickles.
+
+Format ``icarus-policy-v1`` (two files side by side, ``NAME.safetensors`` and ``NAME.json``):
+the JSON names the observation (``basic`` 15-D or ``extended`` 21-D, gate vector in the world
+frame), the feature transform version, the hidden layers and activation, and the action semantics
+(``ctbr``: [thrust, roll_rate, pitch_rate, yaw_rate] in [-1, 1]). Inference is plain numpy:
+features -> tanh MLP -> mean action, clipped to [-1, 1] (the deterministic policy).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from safetensors.numpy import load as load_safetensors
+from safetensors.numpy import save as save_safetensors
+
+from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
+from icarus_vision.policy.features import FEATURES_VERSION, feature_dim, obs_to_features
+
+FORMAT = "icarus-policy-v1"
+ACTION = "ctbr"
+OBS_DIMS = {"basic": 15, "extended": 21}
+
+
+def _paths(path: str | Path) -> tuple[Path, Path]:
+    p = Path(path)
+    stem = p.with_suffix("") if p.suffix in (".safetensors", ".json") else p
+    return stem.with_suffix(".safetensors"), stem.with_suffix(".json")
+
+
+def export_sb3_policy(model, path: str | Path, observation: str, meta: dict | None = None) -> Path:
+    """Write a stable-baselines3 PPO MlpPolicy's actor as ``path``.safetensors + ``path``.json.
+
+    Returns:
+        The .safetensors path.
+    """
+    pol = model.policy
+    layers = [m for m in pol.mlp_extractor.policy_net if hasattr(m, "weight")]
+    tensors = {}
+    for i, layer in enumerate([*layers, pol.action_net]):
+        tensors[f"w{i}"] = layer.weight.detach().cpu().numpy().astype(np.float32)
+        tensors[f"b{i}"] = layer.bias.detach().cpu().numpy().astype(np.float32)
+    act = type(pol.mlp_extractor.policy_net[1]).__name__.lower() if len(pol.mlp_extractor.policy_net) > 1 else "tanh"
+    desc = {
+        "format": FORMAT,
+        "observation": observation,
+        "obs_dim": OBS_DIMS[observation],
+        "gate_frame": "world",
+        "features": FEATURES_VERSION,
+        "hidden": [int(layer.out_features) for layer in layers],
+        "activation": act,
+        "action": ACTION,
+        "action_dim": 4,
+        "meta": meta or {},
+    }
+    st, js = _paths(path)
+    atomic_write_bytes(st, save_safetensors(tensors))
+    atomic_write_json(js, desc)
+    return st
+
+
+@dataclass
+class ExportedPolicy:
+    """A loaded exported policy. ``act(obs)`` maps (N, obs_dim) or (obs_dim,) to actions."""
+
+    weights: list[tuple[np.ndarray, np.ndarray]]
+    desc: dict
+    path: Path
+
+    @property
+    def obs_dim(self) -> int:
+        return int(self.desc["obs_dim"])
+
+    @property
+    def observation(self) -> str:
+        return self.desc["observation"]
+
+    @property
+    def name(self) -> str:
+        return self.desc.get("meta", {}).get("name", self.path.stem)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Deterministic actions.
+
+        Args:
+            obs: (N, obs_dim) or (obs_dim,) observations, gate vectors in the world frame.
+
+        Returns:
+            (N, 4) or (4,) float32 actions in [-1, 1].
+        """
+        obs = np.asarray(obs, dtype=np.float32)
+        single = obs.ndim == 1
+        x = obs[None] if single else obs
+        if x.ndim != 2 or x.shape[1] != self.obs_dim:
+            raise ValueError(f"policy {self.path} expects observations of {self.obs_dim} entries, got shape {obs.shape}")
+        h = obs_to_features(x)
+        for w, b in self.weights[:-1]:
+            h = np.tanh(h @ w.T + b)
+        w, b = self.weights[-1]
+        out = np.clip(h @ w.T + b, -1.0, 1.0).astype(np.float32)
+        return out[0] if single else out
+
+
+def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> ExportedPolicy:
+    """Load an exported policy; errors name the file and any convention that does not match.
+
+    Raises:
+        FileNotFoundError: a file is missing.
+        ValueError: corrupt file, unknown format, or observation/action conventions that differ
+            from what the caller flies (``expect_obs_dim``; actions must be 4-D CTBR).
+    """
+    st, js = _paths(path)
+    for f in (st, js):
+        if not f.is_file():
+            raise FileNotFoundError(f"{f}: policy file not found")
+    try:
+        desc = json.loads(js.read_text())
+        tensors = load_safetensors(st.read_bytes())
+    except Exception as e:  # noqa: BLE001 - any decoding failure is a corrupt file
+        raise ValueError(f"{st}: corrupt or unreadable policy ({type(e).__name__}: {e})") from None
+    if desc.get("format") != FORMAT:
+        raise ValueError(f"{js}: unknown policy format {desc.get('format')!r} (expected {FORMAT})")
+    if desc.get("action") != ACTION or desc.get("action_dim") != 4:
+        raise ValueError(f"{js}: action convention {desc.get('action')!r}/{desc.get('action_dim')} does not match ctbr/4")
+    if desc.get("features") != FEATURES_VERSION or desc.get("gate_frame") != "world":
+        raise ValueError(f"{js}: feature transform {desc.get('features')!r} (gate frame {desc.get('gate_frame')!r}) does not match {FEATURES_VERSION} (world)")
+    if expect_obs_dim is not None and desc.get("obs_dim") != expect_obs_dim:
+        raise ValueError(f"{js}: policy observes {desc.get('obs_dim')} entries but this run provides {expect_obs_dim}")
+    n = len(desc["hidden"]) + 1
+    try:
+        weights = [(tensors[f"w{i}"], tensors[f"b{i}"]) for i in range(n)]
+    except KeyError as e:
+        raise ValueError(f"{st}: missing tensor {e}") from None
+    if weights[0][0].shape[1] != feature_dim(desc["obs_dim"]) or weights[-1][0].shape[0] != 4:
+        raise ValueError(f"{st}: layer shapes do not match the description in {js.name}")
+    return ExportedPolicy(weights, desc, st)

@@ -1,0 +1,83 @@
+"""The policy's fixed input transform: observation (N, 15 or 21) -> features (N, F).
+
+The policy reads the standard observation, whichever source filled it (ground truth or the
+estimator). This transform makes what it reads independent of where the track lies: world x, y are
+dropped, and velocity and gate vectors are turned into the drone's heading frame (rotation by −yaw,
+so "ahead" is +x whatever the track's orientation). Everything is scaled to order one and clipped.
+The same numpy function runs in training (``FeatureVecEnv``) and in the exported policy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+BASIC_DIM, EXTENDED_DIM = 15, 21
+FEATURES_VERSION = "icarus-features-v1"
+POS_SCALE, VEL_SCALE, RATE_SCALE, CLIP = 5.0, 5.0, 5.0, 5.0
+
+
+def feature_dim(obs_dim: int) -> int:
+    """Number of features for an observation of ``obs_dim`` (15 or 21)."""
+    if obs_dim not in (BASIC_DIM, EXTENDED_DIM):
+        raise ValueError(f"observation must have 15 or 21 entries, got {obs_dim}")
+    return 16 if obs_dim == BASIC_DIM else 21
+
+
+def _yaw_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Rotate world vectors (N, 3) by −yaw about z."""
+    return np.stack((c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]), axis=1)
+
+
+def obs_to_features(obs: np.ndarray) -> np.ndarray:
+    """Features of world-frame observations.
+
+    Args:
+        obs: (N, 15) or (N, 21) observations with world-frame gate vectors.
+
+    Returns:
+        (N, 16) or (N, 21) float32: altitude, velocity (heading frame), roll, pitch, body rates,
+        next gate vector (heading frame), its distance, its unit direction; extended adds the gate's
+        passage direction (heading frame, x, y) and the following gate's vector (heading frame).
+    """
+    obs = np.asarray(obs, dtype=np.float64)
+    if obs.ndim != 2:
+        raise ValueError(f"obs must be (N, 15) or (N, 21), got shape {obs.shape}")
+    feature_dim(obs.shape[1])
+    yaw = obs[:, 8]
+    c, s = np.cos(yaw), np.sin(yaw)
+    gate = _yaw_frame(obs[:, 12:15], c, s)
+    dist = np.linalg.norm(gate, axis=1, keepdims=True)
+    parts = [
+        obs[:, 2:3] / POS_SCALE,
+        _yaw_frame(obs[:, 3:6], c, s) / VEL_SCALE,
+        obs[:, 6:8],
+        obs[:, 9:12] / RATE_SCALE,
+        gate / POS_SCALE,
+        dist / POS_SCALE,
+        gate / np.maximum(dist, 1e-3),
+    ]
+    if obs.shape[1] == EXTENDED_DIM:
+        parts += [_yaw_frame(obs[:, 15:18], c, s)[:, :2], _yaw_frame(obs[:, 18:21], c, s) / POS_SCALE]
+    return np.clip(np.concatenate(parts, axis=1), -CLIP, CLIP).astype(np.float32)
+
+
+class FeatureVecEnv(VecEnvWrapper):
+    """Feeds ``obs_to_features`` of the wrapped VecEnv's observations to the learner."""
+
+    def __init__(self, venv: VecEnv) -> None:
+        import gymnasium as gym
+
+        dim = feature_dim(venv.observation_space.shape[0])
+        space = gym.spaces.Box(-CLIP, CLIP, shape=(dim,), dtype=np.float32)
+        super().__init__(venv, observation_space=space)
+
+    def reset(self) -> np.ndarray:
+        return obs_to_features(self.venv.reset())
+
+    def step_wait(self):
+        obs, rew, done, infos = self.venv.step_wait()
+        for i in np.flatnonzero(done):
+            if "terminal_observation" in infos[i]:
+                infos[i]["terminal_observation"] = obs_to_features(infos[i]["terminal_observation"][None])[0]
+        return obs_to_features(obs), rew, done, infos

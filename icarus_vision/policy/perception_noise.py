@@ -1,0 +1,129 @@
+"""Perception noise on the gate observation (obs[12:15]) during training.
+
+The race flies on the estimator's output, not on ground truth, so the policy trains on a noisy gate
+vector: each step the detector "sees" the next gate with probability 1 − miss(d) and then the gate's
+estimated world position is redrawn around the truth with standard deviation σ(d) per axis (d = the
+distance to the gate); on a miss the last estimate is held (as the estimator carries it through
+odometry) and the relative vector is recomputed from the drone's current position. A new target
+gate always starts with a fresh draw (the map prior).
+
+σ(d) and miss(d) come from a detector error model file written by ``eval-detector`` when one is
+given, otherwise from a linear parametric default.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from icarus_vision.policy.config import PerceptionNoiseConfig
+
+GATE = slice(12, 15)
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """Gate-position error as a function of distance (piecewise linear between bin centres).
+
+    Attributes:
+        distance_m: (B,) bin centres, metres, increasing.
+        sigma_m: (B,) per-axis standard deviation of the gate position error, metres.
+        miss_rate: (B,) probability that the gate is not detected.
+    """
+
+    distance_m: tuple[float, ...]
+    sigma_m: tuple[float, ...]
+    miss_rate: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        d, s, m = (np.asarray(x, float) for x in (self.distance_m, self.sigma_m, self.miss_rate))
+        if not (len(d) == len(s) == len(m) >= 1):
+            raise ValueError("error model: distance_m, sigma_m and miss_rate need the same length >= 1")
+        if not (np.all(np.isfinite(d)) and np.all(np.diff(d) > 0)):
+            raise ValueError("error model: distance_m must be finite and increasing")
+        if np.any(~np.isfinite(s)) or np.any(s < 0) or np.any((m < 0) | (m > 1)):
+            raise ValueError("error model: sigma_m must be >= 0 and miss_rate in [0, 1]")
+
+    def sigma(self, dist: np.ndarray) -> np.ndarray:
+        return np.interp(dist, self.distance_m, self.sigma_m)
+
+    def miss(self, dist: np.ndarray) -> np.ndarray:
+        return np.interp(dist, self.distance_m, self.miss_rate)
+
+    @classmethod
+    def parametric(cls, cfg: PerceptionNoiseConfig, max_dist: float = 30.0) -> ErrorModel:
+        d = np.array([0.0, max_dist])
+        return cls(
+            tuple(d),
+            tuple(cfg.sigma_base_m + cfg.sigma_per_m * d),
+            tuple(np.clip(cfg.miss_base + cfg.miss_per_m * d, 0, 1)),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> ErrorModel:
+        """Read the ``error_model`` JSON written by eval-detector (keys distance_m, sigma_m, miss_rate)."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: error model file not found")
+        try:
+            data = json.loads(path.read_text())
+            return cls(tuple(data["distance_m"]), tuple(data["sigma_m"]), tuple(data["miss_rate"]))
+        except (json.JSONDecodeError, KeyError, TypeError) as e:
+            raise ValueError(f"{path}: not a valid error model ({e})") from None
+
+    @classmethod
+    def from_config(cls, cfg: PerceptionNoiseConfig) -> ErrorModel:
+        return cls.load(cfg.error_model) if cfg.error_model else cls.parametric(cfg)
+
+
+class PerceptionNoise:
+    """Batched noise state for N drones; ``apply`` maps true observations to perceived ones."""
+
+    def __init__(self, model: ErrorModel, n: int, seed: int | None = None) -> None:
+        self.model = model
+        self.rng = np.random.default_rng(seed)
+        self.est = np.zeros((n, 3))
+        self.true_prev = np.full((n, 3), np.nan)
+
+    def apply(self, obs: np.ndarray, new_episode: np.ndarray | None = None) -> np.ndarray:
+        """Perceived observations.
+
+        Args:
+            obs: (N, D) true observations with world-frame gate vectors in obs[:, 12:15].
+            new_episode: (N,) bool, drones whose episode just (re)started.
+
+        Returns:
+            (N, D) float32 copy with obs[:, 12:15] replaced by the perceived gate vector.
+        """
+        pos = obs[:, 0:3].astype(np.float64)
+        true_gate = pos + obs[:, GATE]
+        dist = np.linalg.norm(obs[:, GATE], axis=1)
+        switched = ~(np.abs(true_gate - self.true_prev) < 1e-3).all(axis=1)
+        if new_episode is not None:
+            switched |= new_episode
+        seen = switched | (self.rng.random(len(obs)) >= self.model.miss(dist))
+        noise = self.rng.normal(size=(len(obs), 3)) * self.model.sigma(dist)[:, None]
+        self.est = np.where(seen[:, None], true_gate + noise, self.est)
+        self.true_prev = true_gate
+        out = obs.astype(np.float32, copy=True)
+        out[:, GATE] = self.est - pos
+        return out
+
+
+class PerceptionNoiseVecEnv(VecEnvWrapper):
+    """Applies ``PerceptionNoise`` to a VecEnv's observations (world-frame gate vectors)."""
+
+    def __init__(self, venv: VecEnv, model: ErrorModel, seed: int | None = None) -> None:
+        super().__init__(venv)
+        self.noise = PerceptionNoise(model, venv.num_envs, seed)
+
+    def reset(self) -> np.ndarray:
+        return self.noise.apply(self.venv.reset(), np.ones(self.num_envs, bool))
+
+    def step_wait(self):
+        obs, rew, done, infos = self.venv.step_wait()
+        return self.noise.apply(obs, done), rew, done, infos

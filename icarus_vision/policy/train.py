@@ -1,0 +1,211 @@
+"""PPO training on the batched backend: curriculum, randomisation, perception noise, checkpoints.
+
+Output folder layout (``out``):
+
+    config.json                 the resolved TrainConfig
+    tb/                         TensorBoard logs (SB3's, plus curriculum/* and reward terms)
+    checkpoints/last.zip        resumable SB3 checkpoint (written atomically), last_state.json beside it
+    best.safetensors/.json      exported policy with the best evaluation (stage, success)
+    policy.safetensors/.json    exported final policy
+    metrics.json                wall-clock curve: timesteps, stage, success rate, mean return
+
+Ctrl-C saves ``checkpoints/last.zip`` and re-raises; ``resume=True`` continues from it with the
+step count and curriculum stage intact.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from icarus_vision.fileio import atomic_write_json
+from icarus_vision.policy.callbacks import (
+    CurriculumCallback,
+    MetricsCallback,
+    RunningAdvantageNorm,
+    episode_success,
+)
+from icarus_vision.policy.config import TrainConfig, config_to_dict
+from icarus_vision.policy.export import export_sb3_policy
+from icarus_vision.policy.features import FeatureVecEnv
+from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
+from icarus_vision.sim.config import EnvConfig
+from icarus_vision.sim.quad import QuadParams
+from icarus_vision.sim.vec_env import BatchedRacingVecEnv
+
+
+@dataclass
+class TrainResult:
+    out: Path
+    timesteps: int
+    stage: int
+    num_gates: int
+    best_success: float
+    policy_path: Path
+
+
+def make_train_env(cfg: TrainConfig, num_envs: int, num_gates: int, seed: int):
+    """The training VecEnv stack: batched drones -> perception noise -> policy features."""
+    env_cfg = EnvConfig(
+        random_tracks=True,
+        num_gates=num_gates,
+        randomization=cfg.randomization,
+        reward=cfg.reward_config(),
+        observation=cfg.observation,
+        max_episode_s=cfg.max_episode_s,
+    )
+    venv = BatchedRacingVecEnv(num_envs, env_cfg)
+    venv.seed(seed)
+    if cfg.perception.enabled:
+        venv = PerceptionNoiseVecEnv(venv, ErrorModel.from_config(cfg.perception), seed=seed + 7919)
+    return FeatureVecEnv(venv)
+
+
+def evaluate_model(model, cfg: TrainConfig, num_gates: int, episodes: int, seed: int) -> float:
+    """Success rate of the deterministic policy over ``episodes`` random tracks (one per drone)."""
+    env = make_train_env(cfg, episodes, num_gates, seed)
+    obs = env.reset()
+    result: list[bool | None] = [None] * episodes
+    while any(r is None for r in result):
+        actions, _ = model.predict(obs, deterministic=True)
+        obs, _, done, infos = env.step(actions)
+        for i in np.flatnonzero(done):
+            if result[i] is None:
+                result[i] = episode_success(infos[i])
+    return float(np.mean(result))
+
+
+def _save_checkpoint(model, ckpt_dir: Path, state: dict) -> None:
+    ckpt_dir.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=ckpt_dir, prefix=".last.", suffix=".zip")
+    os.close(fd)
+    try:
+        model.save(tmp)
+        os.replace(tmp, ckpt_dir / "last.zip")
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    atomic_write_json(ckpt_dir / "last_state.json", state)
+
+
+def train_policy(
+    cfg: TrainConfig,
+    out: str | Path,
+    *,
+    seed: int = 0,
+    resume: bool = False,
+    timesteps: int | None = None,
+    progress=None,
+    verbose: int = 1,
+) -> TrainResult:
+    """Train (or resume) a racing policy. ``progress(timesteps, curriculum)`` is called every step."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    out = Path(out)
+    ckpt_dir = out / "checkpoints"
+    total = timesteps if timesteps is not None else cfg.total_timesteps
+    state = {"stage": 0, "best": [-1, -1.0], "wall_s": 0.0, "metrics": []}
+    if resume:
+        last = ckpt_dir / "last.zip"
+        if not last.is_file():
+            raise FileNotFoundError(f"{last}: no checkpoint to resume from")
+        try:
+            state = json.loads((ckpt_dir / "last_state.json").read_text())
+        except (OSError, json.JSONDecodeError) as e:
+            raise ValueError(f"{ckpt_dir / 'last_state.json'}: corrupt checkpoint state ({e})") from None
+    elif ckpt_dir.exists() and any(ckpt_dir.iterdir()):
+        raise ValueError(f"{out}: holds a previous run; pass --resume to continue it or choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out / "config.json", config_to_dict(cfg))
+    torch.set_num_threads(cfg.ppo.torch_threads)
+
+    p = cfg.ppo
+    stage = int(state["stage"])
+    env = make_train_env(cfg, p.num_envs, cfg.curriculum.stages[stage], seed)
+    if resume:
+        try:
+            model = PPO.load(ckpt_dir / "last.zip", env=env, device="cpu")
+        except Exception as e:  # noqa: BLE001 - a broken zip is a user-facing error
+            raise ValueError(f"{ckpt_dir / 'last.zip'}: corrupt checkpoint ({type(e).__name__}: {e})") from None
+    else:
+        model = PPO(
+            "MlpPolicy",
+            env,
+            learning_rate=p.learning_rate,
+            n_steps=p.n_steps,
+            batch_size=p.batch_size,
+            n_epochs=p.n_epochs,
+            gamma=p.gamma,
+            gae_lambda=p.gae_lambda,
+            clip_range=p.clip_range,
+            ent_coef=p.ent_coef,
+            vf_coef=p.vf_coef,
+            max_grad_norm=p.max_grad_norm,
+            normalize_advantage=p.advantage_norm == "minibatch",
+            policy_kwargs={"net_arch": list(p.net_arch), "log_std_init": p.log_std_init},
+            tensorboard_log=str(out / "tb"),
+            seed=seed,
+            device="cpu",
+            verbose=0,
+        )
+        with torch.no_grad():  # start from hover: mean thrust action balances gravity
+            model.policy.action_net.bias[0] = QuadParams().hover_thrust_action
+
+    curriculum = CurriculumCallback(cfg.curriculum, stage=stage, verbose=verbose)
+    metrics = MetricsCallback(curriculum, progress=progress)
+    metrics.rows = list(state.get("metrics", []))
+    metrics.wall_offset = float(state.get("wall_s", 0.0))
+    best = list(state["best"])
+
+    def snapshot() -> dict:
+        return {"stage": curriculum.stage, "best": best, "wall_s": metrics.elapsed(), "metrics": metrics.rows,
+                "timesteps": int(model.num_timesteps)}  # fmt: skip
+
+    class Periodic(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.next_ckpt = model.num_timesteps + cfg.checkpoint_every
+            self.next_eval = model.num_timesteps + cfg.eval_every
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= self.next_eval:
+                self.next_eval += cfg.eval_every
+                n = curriculum.num_gates
+                rate = evaluate_model(model, cfg, n, cfg.eval_episodes, seed + 10_000 + self.num_timesteps)
+                self.logger.record("eval/success_rate", rate)
+                if (curriculum.stage, rate) > tuple(best):
+                    best[:] = [curriculum.stage, rate]
+                    meta = {"name": "best", "timesteps": int(self.num_timesteps), "num_gates": n, "eval_success": rate}
+                    export_sb3_policy(model, out / "best", cfg.observation, meta)
+            if self.num_timesteps >= self.next_ckpt:
+                self.next_ckpt += cfg.checkpoint_every
+                _save_checkpoint(model, ckpt_dir, snapshot())
+            return True
+
+    callbacks = [curriculum, metrics, Periodic()]
+    if p.advantage_norm == "running":
+        callbacks.append(RunningAdvantageNorm())
+    remaining = max(total - int(model.num_timesteps), 0) if resume else total
+    try:
+        if remaining > 0:
+            model.learn(remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume, tb_log_name="ppo")
+    except KeyboardInterrupt:
+        _save_checkpoint(model, ckpt_dir, snapshot())
+        atomic_write_json(out / "metrics.json", metrics.rows)
+        raise
+    _save_checkpoint(model, ckpt_dir, snapshot())
+    atomic_write_json(out / "metrics.json", metrics.rows)
+    meta = {"name": out.name, "timesteps": int(model.num_timesteps), "num_gates": curriculum.num_gates,
+            "seed": seed, "preset": cfg.preset}  # fmt: skip
+    policy_path = export_sb3_policy(model, out / "policy", cfg.observation, meta)
+    if not (out / "best.safetensors").exists():
+        for ext in (".safetensors", ".json"):
+            shutil.copyfile(out / f"policy{ext}", out / f"best{ext}")
+    return TrainResult(out, int(model.num_timesteps), curriculum.stage, curriculum.num_gates, best[1], policy_path)

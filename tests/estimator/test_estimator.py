@@ -1,0 +1,171 @@
+"""The filter and the estimator on synthetic approaches: convergence, outliers, gaps, passages."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from icarus_vision.estimator import (
+    EstimatorConfig,
+    GateEstimator,
+    OdometryReading,
+    displaced_map,
+    fill_observation,
+)
+from icarus_vision.gate_detect import GateDetection, OracleDetector
+from icarus_vision.sim.track import Gate, Track
+
+from .conftest import CAM, odom_at
+
+RATE = 30.0
+
+
+def _fly(est, oracle, t0, t1, x0, x1, detections=True, extra=None):
+    """Fly straight from (x0, 0, 2) to (x1, 0, 2) between t0 and t1 at the camera rate."""
+    out = []
+    for t in np.arange(t0, t1, 1.0 / RATE):
+        x = x0 + (x1 - x0) * (t - t0) / (t1 - t0)
+        od = odom_at(t, [x, 0.0, 2.0])
+        if detections:
+            dets = oracle.detect_pose(od.pos, od.quat)
+            if extra is not None:
+                dets = dets + extra(t)
+            out.append(est.update(od, dets))
+        else:
+            out.append(est.predict(od))
+    return out
+
+
+def _truth_rel(gate: Gate, x: float) -> np.ndarray:
+    return np.asarray(gate.pos) - np.array([x, 0.0, 2.0])
+
+
+@pytest.mark.parametrize("offset", [0.4, 1.5])
+def test_converges_from_a_wrong_prior(two_gates, offset):
+    prior = Track("prior", (Gate((6.0 - offset, offset, 2.0 + offset / 2)), two_gates.gates[1]))
+    est = GateEstimator(CAM, EstimatorConfig(map_sigma_m=0.3), prior)
+    oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+    before = est.predict(odom_at(0.0, [0.0, 0.0, 2.0]))
+    assert np.linalg.norm(before.rel_world - _truth_rel(two_gates.gates[0], 0.0)) > 0.5
+    first = _fly(est, oracle, 0.0, 1.0, 0.0, 1.5)
+    last = first[-1]
+    x = 0.0 + 1.5 * (last.t / 1.0)
+    assert np.linalg.norm(last.rel_world - _truth_rel(two_gates.gates[0], x)) < 0.05
+    if offset > 1.0:
+        assert est.counts["reinit"] == 1
+
+
+def test_rejects_injected_outliers(two_gates):
+    prior = displaced_map(two_gates, 0.2, 3.0, seed=1)
+    est = GateEstimator(CAM, EstimatorConfig(), prior)
+    oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+    rng = np.random.default_rng(4)
+    # A persistent false gate 1.5 m beside the real one, and random quadrilaterals.
+    fake = OracleDetector(Track("fake", (Gate((6.0, 1.5, 2.5)),)), CAM, seed=1)
+
+    def extra(t):
+        od = odom_at(t, [0.0, 0.0, 2.0])
+        c = rng.uniform(20, 200, 2)
+        rand = GateDetection(c + np.array([[0, 0], [30, 0], [30, 30], [0, 30]]), np.ones(4), 1.0)
+        return fake.detect_pose(od.pos, od.quat) + [rand]
+
+    res = _fly(est, oracle, 0.0, 1.5, 0.0, 2.0, extra=extra)
+    x = 2.0 * res[-1].t / 1.5
+    assert np.linalg.norm(res[-1].rel_world - _truth_rel(two_gates.gates[0], x)) < 0.05
+    assert est.counts["outliers"] >= len(res)  # at least one outlier per frame
+    assert est.counts["reinit"] == 0
+
+
+def test_survives_a_second_without_detections(two_gates):
+    est = GateEstimator(CAM, EstimatorConfig(), displaced_map(two_gates, 0.2, 3.0, seed=1))
+    oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+    seen = _fly(est, oracle, 0.0, 1.0, 0.0, 1.0)[-1]
+    blind = _fly(est, oracle, 1.0, 2.0, 1.0, 2.5, detections=False)
+    assert all(not e.measured for e in blind)
+    assert np.trace(blind[-1].cov_world) > np.trace(seen.cov_world)
+    assert blind[-1].since_seen_s > 0.9
+    # Carried by odometry: still right at the end of the gap.
+    x = 1.0 + 1.5 * (blind[-1].t - 1.0)
+    assert np.linalg.norm(blind[-1].rel_world - _truth_rel(two_gates.gates[0], x)) < 0.05
+    again = _fly(est, oracle, 2.0, 2.3, 2.5, 3.0)
+    assert again[-1].measured
+
+
+def test_switches_gate_on_passage(two_gates):
+    est = GateEstimator(CAM, EstimatorConfig(), displaced_map(two_gates, 0.2, 3.0, seed=1))
+    oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+    res = _fly(est, oracle, 0.0, 3.0, 0.0, 9.0)
+    targets = [e.target for e in res]
+    assert targets[0] == 0 and targets[-1] == 1
+    i = targets.index(1)
+    x = 9.0 * res[i].t / 3.0
+    assert x >= 6.0 and 9.0 * res[i - 1].t / 3.0 < 6.0  # switched on the step that crossed
+    assert est.counts["passages"] == 1
+    assert (
+        np.linalg.norm(res[-1].rel_world - _truth_rel(two_gates.gates[1], 9.0 - 3.0 / RATE)) < 0.3
+    )
+
+
+def test_map_free_finds_the_gate_ahead(two_gates):
+    est = GateEstimator(CAM, EstimatorConfig(mode="map-free"))
+    oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+    first = est.predict(odom_at(0.0, [0.0, 0.0, 2.0]))
+    assert not first.valid and np.all(np.isfinite(first.rel_world))
+    res = _fly(est, oracle, 0.0, 3.0, 0.0, 9.0)
+    i = next(k for k, e in enumerate(res) if e.valid)
+    assert i < 5
+    before = [e for e in res[i:] if e.target == 0]
+    x = 9.0 * before[-1].t / 3.0
+    assert np.linalg.norm(before[-1].rel_world - _truth_rel(two_gates.gates[0], x)) < 0.05
+    assert res[-1].target == 1
+    assert np.linalg.norm(res[-1].gate_pos - np.array(two_gates.gates[1].pos)) < 0.3
+
+
+def test_degenerate_corners_are_rejected_and_counted(two_gates):
+    est = GateEstimator(CAM, EstimatorConfig(), two_gates)
+    bad = [
+        GateDetection(np.full((4, 2), np.nan), np.ones(4), 1.0),
+        GateDetection([[10, 10], [50, 10], [90, 10], [130, 10]], np.ones(4), 1.0),
+        GateDetection([[-50, 10], [50, 10], [50, 90], [-50, 90]], np.ones(4), 1.0),
+        GateDetection([[10, 10], [10.5, 10], [10.5, 10.5], [10, 10.5]], np.ones(4), 1.0),
+    ]
+    e = est.update(odom_at(0.0, [0.0, 0.0, 2.0]), bad)
+    assert np.all(np.isfinite(e.rel_world)) and not e.measured
+    c = est.counts
+    assert c["detections"] == 4 and c["accepted"] == 0
+    assert (c["rejected_non_finite"], c["rejected_degenerate"]) == (1, 1)
+    assert (c["rejected_outside_image"], c["rejected_too_small"]) == (1, 1)
+
+
+@pytest.mark.parametrize("field", ["pos", "vel", "quat", "omega", "t"])
+def test_non_finite_odometry_is_refused(two_gates, field):
+    est = GateEstimator(CAM, EstimatorConfig(), two_gates)
+    od = odom_at(0.0, [0.0, 0.0, 2.0])
+    kw = {k: getattr(od, k) for k in ("t", "pos", "vel", "quat", "omega")}
+    kw[field] = np.nan if field == "t" else np.full_like(kw[field], np.nan)
+    with pytest.raises(ValueError, match="not finite"):
+        est.predict(OdometryReading(**kw))
+    with pytest.raises(ValueError, match="not finite"):
+        est.update(OdometryReading(**kw), [])
+
+
+def test_map_aided_needs_a_prior_and_modes_are_checked():
+    with pytest.raises(ValueError, match="prior"):
+        GateEstimator(CAM, EstimatorConfig())
+    with pytest.raises(ValueError, match="mode"):
+        EstimatorConfig(mode="guess")
+
+
+def test_observation_slots_world_and_body(two_gates):
+    est = GateEstimator(CAM, EstimatorConfig(), two_gates)
+    od = odom_at(0.0, [1.0, 0.0, 2.0], yaw=np.pi / 2)
+    e = est.predict(od)
+    np.testing.assert_allclose(e.rel_world, [5.0, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(e.rel_body, [0.0, -5.0, 0.0], atol=1e-9)
+    obs = np.arange(15, dtype=np.float32)
+    w, b = fill_observation(obs, e), fill_observation(obs[None], e, "body")
+    np.testing.assert_allclose(w[12:], e.rel_world)
+    np.testing.assert_allclose(b[0, 12:], e.rel_body)
+    np.testing.assert_array_equal(w[:12], obs[:12])
+    assert w.dtype == np.float32 and obs[12] == 12.0
+    np.testing.assert_allclose(np.trace(e.cov_body), np.trace(e.cov_world))
