@@ -14,12 +14,18 @@ from icarus_vision.cli import app, console, user_errors
 @app.command("eval-policy")
 @user_errors
 def eval_policy_cmd(
-    policy: str = typer.Option("default", help="Exported policy path, 'default' (shipped) or 'scripted'."),
-    track: str = typer.Option(None, help="Built-in track name or TOML path (default: random tracks)."),
+    policy: str = typer.Option(
+        "default", help="Exported policy path, 'default' (shipped) or 'scripted'."
+    ),
+    track: str = typer.Option(
+        None, help="Built-in track name or TOML path (default: random tracks)."
+    ),
     gates: int = typer.Option(10, min=1, help="Gates per random track."),
     episodes: int = typer.Option(100, min=1, help="Episodes."),
     backend: str = typer.Option("batched", help="batched or pybullet."),
-    randomize: bool = typer.Option(False, "--randomize/--no-randomize", help="Domain randomisation."),
+    randomize: bool = typer.Option(
+        False, "--randomize/--no-randomize", help="Domain randomisation."
+    ),
     seed: int = typer.Option(0, help="Random seed."),
     json_path: Path = typer.Option(None, "--json", help="Write the results to this JSON file."),
 ) -> None:
@@ -40,7 +46,12 @@ def eval_policy_cmd(
         ("success rate", f"{r['success_rate']:.1%}"),
         ("crash rate", f"{r['crash_rate']:.1%} {r['crash_reasons'] or ''}"),
         ("mean gates passed", f"{r['mean_gates_passed']:.2f}"),
-        ("lap time [s] median (p10-p90)", "-" if lt["median"] is None else f"{lt['median']:.2f} ({lt['p10']:.2f}-{lt['p90']:.2f})"),
+        (
+            "lap time [s] median (p10-p90)",
+            "-"
+            if lt["median"] is None
+            else f"{lt['median']:.2f} ({lt['p10']:.2f}-{lt['p90']:.2f})",
+        ),
         ("max / mean speed [m/s]", f"{r['max_speed_mps']:.1f} / {r['mean_speed_mps']:.1f}"),
     ]
     for k, v in rows:

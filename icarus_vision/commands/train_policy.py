@@ -16,12 +16,18 @@ from icarus_vision.cli import app, console, user_errors
 @app.command("train-policy")
 @user_errors
 def train_policy_cmd(
-    config: Path = typer.Option(None, help="Training config TOML (keys of TrainConfig; `preset` picks the base)."),
+    config: Path = typer.Option(
+        None, help="Training config TOML (keys of TrainConfig; `preset` picks the base)."
+    ),
     preset: str = typer.Option(None, help="Start from a preset: fast (default) or classic."),
-    timesteps: int = typer.Option(None, min=1, help="Environment steps (default: the config's total_timesteps)."),
+    timesteps: int = typer.Option(
+        None, min=1, help="Environment steps (default: the config's total_timesteps)."
+    ),
     out: Path = typer.Option(None, help="Run folder (default: runs/policy-<timestamp>/)."),
     seed: int = typer.Option(0, help="Random seed."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last checkpoint."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the run in --out from its last checkpoint."
+    ),
     error_model: Path = typer.Option(None, help="Detector error model JSON for perception noise."),
 ) -> None:
     """Train a racing policy with PPO (progress bar, TensorBoard logs under OUT/tb, Ctrl-C saves)."""
@@ -42,7 +48,9 @@ def train_policy_cmd(
         raise ValueError("--resume needs --out: the run folder to continue")
     out = out or Path("runs") / f"policy-{datetime.now():%Y%m%d-%H%M%S}"
     total = timesteps or cfg.total_timesteps
-    console.print(f"training [bold]{cfg.preset}[/] preset for {total:,} steps -> {out}/ (TensorBoard: {out}/tb)")
+    console.print(
+        f"training [bold]{cfg.preset}[/] preset for {total:,} steps -> {out}/ (TensorBoard: {out}/tb)"
+    )
     columns = [TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed:,.0f}/{task.total:,.0f}"),
                TextColumn("{task.fields[rate]} steps/s"), TextColumn("stage {task.fields[stage]} · {task.fields[gates]} gates · success {task.fields[success]}"),
                TimeElapsedColumn(), TimeRemainingColumn()]  # fmt: skip
@@ -59,7 +67,9 @@ def train_policy_cmd(
                            gates=curriculum.num_gates, success=f"{curriculum.success_rate():.0%}")  # fmt: skip
 
         try:
-            result = train_policy(cfg, out, seed=seed, resume=resume, timesteps=total, progress=progress)
+            result = train_policy(
+                cfg, out, seed=seed, resume=resume, timesteps=total, progress=progress
+            )
         except KeyboardInterrupt:
             console.print(f"interrupted: checkpoint saved; continue with --resume --out {out}")
             raise

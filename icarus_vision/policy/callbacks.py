@@ -25,7 +25,9 @@ class CurriculumCallback(BaseCallback):
     reaches ``promote_success``; it is applied with ``env_method("set_num_gates", n)``.
     """
 
-    def __init__(self, cfg: CurriculumConfig, stage: int = 0, verbose: int = 1, on_promote=None) -> None:
+    def __init__(
+        self, cfg: CurriculumConfig, stage: int = 0, verbose: int = 1, on_promote=None
+    ) -> None:
         super().__init__(verbose)
         self.cfg = cfg
         self.stage = stage
@@ -56,7 +58,9 @@ class CurriculumCallback(BaseCallback):
                 self.window.clear()
                 self._apply()
                 if self.verbose:
-                    print(f"curriculum: success {rate:.0%} -> stage {self.stage} ({self.num_gates} gates)")
+                    print(
+                        f"curriculum: success {rate:.0%} -> stage {self.stage} ({self.num_gates} gates)"
+                    )
                 if self.on_promote:
                     self.on_promote(self.stage)
                 return True

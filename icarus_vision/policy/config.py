@@ -91,7 +91,9 @@ class TrainConfig:
     """PPO hyperparameters."""
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
     """Gate-count curriculum."""
-    randomization: RandomizationConfig = field(default_factory=lambda: RandomizationConfig(enabled=True))
+    randomization: RandomizationConfig = field(
+        default_factory=lambda: RandomizationConfig(enabled=True)
+    )
     """Domain randomisation (on by default for training)."""
     perception: PerceptionNoiseConfig = field(default_factory=PerceptionNoiseConfig)
     """Perception noise on the gate observation."""
@@ -135,7 +137,10 @@ def validate_train_config(c: TrainConfig) -> None:
         ("ppo.net_arch", len(p.net_arch) >= 1 and all(n >= 1 for n in p.net_arch)),
         ("ppo.advantage_norm", p.advantage_norm in ("minibatch", "running")),
         ("ppo.torch_threads", p.torch_threads >= 1),
-        ("curriculum.stages", len(c.curriculum.stages) >= 1 and all(n >= 1 for n in c.curriculum.stages)),
+        (
+            "curriculum.stages",
+            len(c.curriculum.stages) >= 1 and all(n >= 1 for n in c.curriculum.stages),
+        ),
         ("curriculum.promote_success", 0 < c.curriculum.promote_success <= 1),
         ("curriculum.window", c.curriculum.window >= 1),
         ("curriculum.min_episodes", 1 <= c.curriculum.min_episodes),

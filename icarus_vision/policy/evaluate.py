@@ -109,7 +109,10 @@ def _run_batched(policy, cfg: EnvConfig, episodes: int, seed: int) -> list[dict]
         for i in np.flatnonzero(done):
             if results[i] is None:
                 r = _episode(infos[i], [0.0])
-                r["max_speed"], r["mean_speed"] = float(speed_max[i]), float(speed_sum[i] / steps[i])
+                r["max_speed"], r["mean_speed"] = (
+                    float(speed_max[i]),
+                    float(speed_sum[i] / steps[i]),
+                )
                 results[i] = r
     return results  # type: ignore[return-value]
 

@@ -43,7 +43,11 @@ def export_sb3_policy(model, path: str | Path, observation: str, meta: dict | No
     for i, layer in enumerate([*layers, pol.action_net]):
         tensors[f"w{i}"] = layer.weight.detach().cpu().numpy().astype(np.float32)
         tensors[f"b{i}"] = layer.bias.detach().cpu().numpy().astype(np.float32)
-    act = type(pol.mlp_extractor.policy_net[1]).__name__.lower() if len(pol.mlp_extractor.policy_net) > 1 else "tanh"
+    act = (
+        type(pol.mlp_extractor.policy_net[1]).__name__.lower()
+        if len(pol.mlp_extractor.policy_net) > 1
+        else "tanh"
+    )
     desc = {
         "format": FORMAT,
         "observation": observation,
@@ -95,7 +99,9 @@ class ExportedPolicy:
         single = obs.ndim == 1
         x = obs[None] if single else obs
         if x.ndim != 2 or x.shape[1] != self.obs_dim:
-            raise ValueError(f"policy {self.path} expects observations of {self.obs_dim} entries, got shape {obs.shape}")
+            raise ValueError(
+                f"policy {self.path} expects observations of {self.obs_dim} entries, got shape {obs.shape}"
+            )
         h = obs_to_features(x)
         for w, b in self.weights[:-1]:
             h = np.tanh(h @ w.T + b)
@@ -124,11 +130,17 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
     if desc.get("format") != FORMAT:
         raise ValueError(f"{js}: unknown policy format {desc.get('format')!r} (expected {FORMAT})")
     if desc.get("action") != ACTION or desc.get("action_dim") != 4:
-        raise ValueError(f"{js}: action convention {desc.get('action')!r}/{desc.get('action_dim')} does not match ctbr/4")
+        raise ValueError(
+            f"{js}: action convention {desc.get('action')!r}/{desc.get('action_dim')} does not match ctbr/4"
+        )
     if desc.get("features") != FEATURES_VERSION or desc.get("gate_frame") != "world":
-        raise ValueError(f"{js}: feature transform {desc.get('features')!r} (gate frame {desc.get('gate_frame')!r}) does not match {FEATURES_VERSION} (world)")
+        raise ValueError(
+            f"{js}: feature transform {desc.get('features')!r} (gate frame {desc.get('gate_frame')!r}) does not match {FEATURES_VERSION} (world)"
+        )
     if expect_obs_dim is not None and desc.get("obs_dim") != expect_obs_dim:
-        raise ValueError(f"{js}: policy observes {desc.get('obs_dim')} entries but this run provides {expect_obs_dim}")
+        raise ValueError(
+            f"{js}: policy observes {desc.get('obs_dim')} entries but this run provides {expect_obs_dim}"
+        )
     n = len(desc["hidden"]) + 1
     try:
         weights = [(tensors[f"w{i}"], tensors[f"b{i}"]) for i in range(n)]

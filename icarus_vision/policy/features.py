@@ -58,7 +58,10 @@ def obs_to_features(obs: np.ndarray) -> np.ndarray:
         gate / np.maximum(dist, 1e-3),
     ]
     if obs.shape[1] == EXTENDED_DIM:
-        parts += [_yaw_frame(obs[:, 15:18], c, s)[:, :2], _yaw_frame(obs[:, 18:21], c, s) / POS_SCALE]
+        parts += [
+            _yaw_frame(obs[:, 15:18], c, s)[:, :2],
+            _yaw_frame(obs[:, 18:21], c, s) / POS_SCALE,
+        ]
     return np.clip(np.concatenate(parts, axis=1), -CLIP, CLIP).astype(np.float32)
 
 
@@ -79,5 +82,7 @@ class FeatureVecEnv(VecEnvWrapper):
         obs, rew, done, infos = self.venv.step_wait()
         for i in np.flatnonzero(done):
             if "terminal_observation" in infos[i]:
-                infos[i]["terminal_observation"] = obs_to_features(infos[i]["terminal_observation"][None])[0]
+                infos[i]["terminal_observation"] = obs_to_features(
+                    infos[i]["terminal_observation"][None]
+                )[0]
         return obs_to_features(obs), rew, done, infos

@@ -42,7 +42,9 @@ class ErrorModel:
     def __post_init__(self) -> None:
         d, s, m = (np.asarray(x, float) for x in (self.distance_m, self.sigma_m, self.miss_rate))
         if not (len(d) == len(s) == len(m) >= 1):
-            raise ValueError("error model: distance_m, sigma_m and miss_rate need the same length >= 1")
+            raise ValueError(
+                "error model: distance_m, sigma_m and miss_rate need the same length >= 1"
+            )
         if not (np.all(np.isfinite(d)) and np.all(np.diff(d) > 0)):
             raise ValueError("error model: distance_m must be finite and increasing")
         if np.any(~np.isfinite(s)) or np.any(s < 0) or np.any((m < 0) | (m > 1)):

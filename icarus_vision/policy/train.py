@@ -119,9 +119,13 @@ def train_policy(
         try:
             state = json.loads((ckpt_dir / "last_state.json").read_text())
         except (OSError, json.JSONDecodeError) as e:
-            raise ValueError(f"{ckpt_dir / 'last_state.json'}: corrupt checkpoint state ({e})") from None
+            raise ValueError(
+                f"{ckpt_dir / 'last_state.json'}: corrupt checkpoint state ({e})"
+            ) from None
     elif ckpt_dir.exists() and any(ckpt_dir.iterdir()):
-        raise ValueError(f"{out}: holds a previous run; pass --resume to continue it or choose another --out")
+        raise ValueError(
+            f"{out}: holds a previous run; pass --resume to continue it or choose another --out"
+        )
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "config.json", config_to_dict(cfg))
     torch.set_num_threads(cfg.ppo.torch_threads)
@@ -133,7 +137,9 @@ def train_policy(
         try:
             model = PPO.load(ckpt_dir / "last.zip", env=env, device="cpu")
         except Exception as e:  # noqa: BLE001 - a broken zip is a user-facing error
-            raise ValueError(f"{ckpt_dir / 'last.zip'}: corrupt checkpoint ({type(e).__name__}: {e})") from None
+            raise ValueError(
+                f"{ckpt_dir / 'last.zip'}: corrupt checkpoint ({type(e).__name__}: {e})"
+            ) from None
     else:
         model = PPO(
             "MlpPolicy",
@@ -178,11 +184,18 @@ def train_policy(
             if self.num_timesteps >= self.next_eval:
                 self.next_eval += cfg.eval_every
                 n = curriculum.num_gates
-                rate = evaluate_model(model, cfg, n, cfg.eval_episodes, seed + 10_000 + self.num_timesteps)
+                rate = evaluate_model(
+                    model, cfg, n, cfg.eval_episodes, seed + 10_000 + self.num_timesteps
+                )
                 self.logger.record("eval/success_rate", rate)
                 if (curriculum.stage, rate) > tuple(best):
                     best[:] = [curriculum.stage, rate]
-                    meta = {"name": "best", "timesteps": int(self.num_timesteps), "num_gates": n, "eval_success": rate}
+                    meta = {
+                        "name": "best",
+                        "timesteps": int(self.num_timesteps),
+                        "num_gates": n,
+                        "eval_success": rate,
+                    }
                     export_sb3_policy(model, out / "best", cfg.observation, meta)
             if self.num_timesteps >= self.next_ckpt:
                 self.next_ckpt += cfg.checkpoint_every
@@ -195,7 +208,12 @@ def train_policy(
     remaining = max(total - int(model.num_timesteps), 0) if resume else total
     try:
         if remaining > 0:
-            model.learn(remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume, tb_log_name="ppo")
+            model.learn(
+                remaining,
+                callback=CallbackList(callbacks),
+                reset_num_timesteps=not resume,
+                tb_log_name="ppo",
+            )
     except KeyboardInterrupt:
         _save_checkpoint(model, ckpt_dir, snapshot())
         atomic_write_json(out / "metrics.json", metrics.rows)
@@ -208,4 +226,6 @@ def train_policy(
     if not (out / "best.safetensors").exists():
         for ext in (".safetensors", ".json"):
             shutil.copyfile(out / f"policy{ext}", out / f"best{ext}")
-    return TrainResult(out, int(model.num_timesteps), curriculum.stage, curriculum.num_gates, best[1], policy_path)
+    return TrainResult(
+        out, int(model.num_timesteps), curriculum.stage, curriculum.num_gates, best[1], policy_path
+    )

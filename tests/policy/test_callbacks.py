@@ -19,7 +19,10 @@ def info(gates, ok):
 
 
 def make_curriculum():
-    cb = CurriculumCallback(CurriculumConfig(stages=(1, 3, 5, 10), promote_success=0.8, window=100, min_episodes=20), verbose=0)
+    cb = CurriculumCallback(
+        CurriculumConfig(stages=(1, 3, 5, 10), promote_success=0.8, window=100, min_episodes=20),
+        verbose=0,
+    )
     env = FakeVecEnv()
     cb.venv = env
     return cb, env
@@ -55,7 +58,10 @@ def test_curriculum_stays_at_last_stage():
 
 def test_running_mean_std_matches_numpy_over_all_batches():
     rng = np.random.default_rng(0)
-    batches = [rng.normal(loc, scale, size) for loc, scale, size in [(3, 2, 500), (-1, 0.5, 37), (10, 5, 2000), (0, 1, 1)]]
+    batches = [
+        rng.normal(loc, scale, size)
+        for loc, scale, size in [(3, 2, 500), (-1, 0.5, 37), (10, 5, 2000), (0, 1, 1)]
+    ]
     rms = RunningMeanStd()
     for b in batches:
         rms.update(b)

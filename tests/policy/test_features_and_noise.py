@@ -65,11 +65,15 @@ def test_missed_detection_holds_the_world_estimate_while_the_drone_moves():
 
 def test_error_model_file(tmp_path):
     p = tmp_path / "em.json"
-    p.write_text('{"distance_m": [1, 5, 10], "sigma_m": [0.01, 0.05, 0.2], "miss_rate": [0.0, 0.1, 0.3]}')
+    p.write_text(
+        '{"distance_m": [1, 5, 10], "sigma_m": [0.01, 0.05, 0.2], "miss_rate": [0.0, 0.1, 0.3]}'
+    )
     m = ErrorModel.load(p)
     assert m.sigma(np.array([3.0]))[0] == pytest.approx(0.03)
     bad = tmp_path / "bad.json"
     bad.write_text('{"distance_m": [1]}')
     with pytest.raises(ValueError, match="bad.json"):
         ErrorModel.load(bad)
-    assert ErrorModel.from_config(PerceptionNoiseConfig()).sigma(np.array([0.0]))[0] == pytest.approx(0.02)
+    assert ErrorModel.from_config(PerceptionNoiseConfig()).sigma(np.array([0.0]))[
+        0
+    ] == pytest.approx(0.02)
