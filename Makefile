@@ -14,6 +14,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# Until the shipped detector lands, the default race flies the shipped pilot on the oracle
+# (true gate position); override with e.g. `make race ARGS="--detector cnn"`.
+ARGS ?= --detector oracle --policy scripted
+
 race: $(STAMP)
 	$(BIN)/icarus-vision race $(ARGS)
 

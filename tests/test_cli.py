@@ -35,6 +35,10 @@ def test_race_writes_report_and_plot(tmp_path):
             "single-gate",
             "--backend",
             "batched",
+            "--detector",
+            "oracle",
+            "--policy",
+            "scripted",
             "--out",
             str(out),
             "--json",
@@ -45,19 +49,23 @@ def test_race_writes_report_and_plot(tmp_path):
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["finished"] and report["track"] == "single-gate"
     assert (out / "trajectory.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (out / "race.mp4").stat().st_size > 1000
 
 
 @pytest.mark.parametrize(
     "args, msg",
     [
         (["race", "--track", "nowhere"], "built-in tracks: single-gate"),
+        (["race", "--detector", "sonar"], "sonar"),
+        (["race", "--policy", "nope.safetensors"], "nope.safetensors: policy file not found"),
         (["race", "--track", "missing.toml"], "missing.toml: track file not found"),
         (["race", "--backend", "mujoco"], "unknown backend"),
         (["race", "--quad", "nope.toml"], "nope.toml: quadrotor file not found"),
     ],
 )
 def test_race_bad_input_is_one_line_error(args, msg, tmp_path):
-    res = runner.invoke(app, args)
+    base = ["--detector", "oracle", "--policy", "scripted"]
+    res = runner.invoke(app, [args[0], *base, *args[1:]])  # later options win
     assert res.exit_code == 1
     assert msg in res.output
     assert "Traceback" not in res.output
@@ -66,12 +74,12 @@ def test_race_bad_input_is_one_line_error(args, msg, tmp_path):
 def test_bad_track_file_names_file_and_gate(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nsize=0.0\n')
-    res = runner.invoke(app, ["race", "--track", str(p)])
+    res = runner.invoke(app, ["race", "--track", str(p), "--detector", "oracle", "--policy", "scripted"])
     assert res.exit_code == 1 and "bad.toml gate 0: size must be > 0" in res.output
 
 
 def test_error_text_with_brackets_is_printed_verbatim(tmp_path):
     p = tmp_path / "b.toml"
     p.write_text('name="x"\n[start]\npos=[0,0]\n[[gates]]\npos=[5,0,2]\n')
-    res = runner.invoke(app, ["race", "--track", str(p)])
+    res = runner.invoke(app, ["race", "--track", str(p), "--detector", "oracle", "--policy", "scripted"])
     assert res.exit_code == 1 and "b.toml [start]: start.pos must be a list of 3" in res.output

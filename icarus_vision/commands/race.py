@@ -1,4 +1,4 @@
-"""`icarus-vision race`: fly a race headless, with report and plot."""
+"""`icarus-vision race`: fly a course headless with the whole pipeline; report, plot and video."""
 
 from __future__ import annotations
 
@@ -21,28 +21,39 @@ def race_cmd(
     quad: Path = typer.Option(None, help="Quadrotor TOML file (default: the built-in racer-500g)."),
     laps: int = typer.Option(None, min=1, help="Laps to fly (default: the track's own)."),
     seed: int = typer.Option(0, help="Random seed."),
-    backend: str = typer.Option("pybullet", help="Physics backend: pybullet or batched."),
+    detector: str = typer.Option(
+        "cnn", help="cnn[:PATH], opencv, or oracle (true gate position, no camera)."
+    ),
+    policy: str = typer.Option(
+        "default", help="Exported policy path, 'default' (shipped) or 'scripted'."
+    ),
+    backend: str = typer.Option(
+        "pybullet", help="Physics backend: pybullet or batched (camera renders via PyBullet)."
+    ),
     randomize: bool = typer.Option(
         False, "--randomize/--no-randomize", help="Randomise mass, wind and gates."
     ),
+    latency: int = typer.Option(1, min=0, help="Perception latency in camera frames."),
+    video: Path = typer.Option(None, help="Video path (default: OUT/race.mp4)."),
+    no_video: bool = typer.Option(False, "--no-video", help="Skip the video (faster)."),
     json_path: Path = typer.Option(None, "--json", help="Also write the report to this JSON file."),
     out: Path = typer.Option(None, help="Output folder (default: runs/race-<timestamp>/)."),
 ) -> None:
-    """Fly a race headless and write its report and trajectory plot.
+    """Fly a race headless: camera -> detector -> estimator -> policy -> physics.
 
-    The pilot is currently the scripted geometric controller on ground-truth observations.
+    Writes OUT/report.json, OUT/trajectory.png and OUT/race.mp4 (FPV with detections beside a top
+    view, real time) and prints a summary.
     """
     from icarus_vision.fileio import atomic_write_json
     from icarus_vision.racing.plots import plot_trajectory
     from icarus_vision.racing.runner import run_race
+    from icarus_vision.racing.video import write_video
     from icarus_vision.sim.quad import load_quad
 
-    if backend not in ("pybullet", "batched"):
-        raise ValueError(f"unknown backend {backend!r}; choose pybullet or batched")
     quad_params = load_quad(quad) if quad is not None else None
-    result = run_race(
-        track, quad=quad_params, laps=laps, seed=seed, backend=backend, randomize=randomize
-    )
+    want_video = not no_video
+    result = run_race(track, quad=quad_params, laps=laps, seed=seed, detector=detector, policy=policy,
+                      backend=backend, randomize=randomize, latency_frames=latency, video=want_video)  # fmt: skip
     out = out or Path("runs") / f"race-{datetime.now():%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
     r = result.report
@@ -50,27 +61,44 @@ def race_cmd(
     if json_path is not None:
         atomic_write_json(json_path, r)
     crash = result.pos[-1] if r["crashed"] else None
+    title = f"{r['track']} · {r['policy']} · {r['detector']}"
     plot_trajectory(
-        out / "trajectory.png",
-        result.track,
-        result.t,
-        result.pos,
-        result.speed,
-        crash,
-        title=f"{r['track']} ({r['policy']})",
+        out / "trajectory.png", result.track, result.t, result.pos, result.speed, crash, title=title
     )
-    table = Table(title=f"race: {r['track']} · {r['policy']} · {r['backend']}")
-    table.add_column("metric")
-    table.add_column("value")
+    video_path = None
+    if want_video:
+        video_path = video or out / "race.mp4"
+        fps = quad_params.camera.rate_hz if quad_params else 30.0
+        write_video(video_path, result.video, fps)
+    p = r["perception"]
+    err = p["rel_gate_error_m"]
     rows = [
         ("gates", f"{r['gates_passed']}/{r['gates_total']}"),
         ("finished", str(r["finished"])),
         ("crash", r["crash_reason"] or "-"),
         ("lap times [s]", ", ".join(f"{x:.2f}" for x in r["lap_times_s"]) or "-"),
         ("max / mean speed [m/s]", f"{r['max_speed_mps']:.1f} / {r['mean_speed_mps']:.1f}"),
-        ("real-time factor", f"{r['realtime_factor']:.1f}x"),
+        ("real-time factor", f"{r['realtime_factor']:.2f}x"),
+        (
+            "frames / detection rate",
+            f"{p['frames']} / {p['detection_rate']:.0%}" if p["frames"] else "-",
+        ),
+        (
+            "gate error [m] median / p95",
+            "-" if err["median"] is None else f"{err['median']:.3f} / {err['p95']:.3f}",
+        ),
     ]
+    if r["time_optimal_s"] is not None:
+        rows.append(
+            (
+                "time-optimal [s] / ratio",
+                f"{r['time_optimal_s']:.2f} / {r['time_optimal_ratio']:.2f}",
+            )
+        )
+    table = Table(title=f"race: {escape(title)} · {r['backend']}")
+    table.add_column("metric")
+    table.add_column("value")
     for k, v in rows:
         table.add_row(escape(k), escape(v))
     console.print(table)
-    console.print(f"report and plot written to {out}/")
+    console.print(f"report, plot{' and video' if video_path else ''} written to {out}/")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import time
 from dataclasses import replace
 from datetime import datetime
@@ -11,6 +12,10 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from icarus_vision.cli import app, console, user_errors
+
+
+def _raise_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 @app.command("train-policy")
@@ -54,6 +59,8 @@ def train_policy_cmd(
     columns = [TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed:,.0f}/{task.total:,.0f}"),
                TextColumn("{task.fields[rate]} steps/s"), TextColumn("stage {task.fields[stage]} · {task.fields[gates]} gates · success {task.fields[success]}"),
                TimeElapsedColumn(), TimeRemainingColumn()]  # fmt: skip
+    # SIGTERM (a scheduler stopping the job) saves a checkpoint exactly like Ctrl-C.
+    signal.signal(signal.SIGTERM, _raise_interrupt)
     t0 = time.perf_counter()
     with Progress(*columns, console=console, transient=False) as bar:
         task = bar.add_task("PPO", total=total, rate="-", stage=0, gates="-", success="-")

@@ -122,6 +122,14 @@ class GateEstimator:
         measured = self._fuse(odom, detections)
         return self._estimate(measured=measured)
 
+    def gate_after_position(self) -> np.ndarray | None:
+        """Map-aided: the estimated world position (3,) of the gate after the next one (the last
+        gate repeats at the end of the course); None in map-free mode."""
+        if self.config.mode != "map-aided" or not self.passage_gate:
+            return None
+        j = min(self.target + 1, len(self.passage_gate) - 1)
+        return self.tracks[self.passage_gate[j]].pos.copy()
+
     # -- prediction and gate switching ---------------------------------------------------------
     def _advance(self, odom: OdometryReading) -> None:
         check_odometry(odom)

@@ -1,7 +1,8 @@
-"""Fly one race in a single-drone env and build its report.
+"""Fly one race with the whole pipeline in the loop and build its report.
 
-For now the pilot is the scripted controller flying on ground-truth observations; the vision
-pipeline (camera -> detector -> estimator -> policy) plugs into the same loop.
+``run_race`` resolves the track, quadrotor, detector and pilot, builds the PyBullet (or batched)
+world and the rendering scene, flies ``fly_loop`` and returns the report of ARCHITECTURE.md with
+the trajectory and, when asked, the video frames.
 """
 
 from __future__ import annotations
@@ -11,23 +12,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from icarus_vision.gate_detect.registry import make_detector, parse_spec
+from icarus_vision.policy.export import ExportedPolicy
+from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.scripted import ScriptedController
-from icarus_vision.racing.report import empty_perception, validate_report
+from icarus_vision.racing.loop import fly_loop
+from icarus_vision.racing.report import validate_report
+from icarus_vision.render.camera import Camera
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.quad import QuadParams
-from icarus_vision.sim.registration import make_env
+from icarus_vision.sim.registration import BACKENDS, make_env
 from icarus_vision.sim.track import Track
+
+
+DETECTORS = ("cnn", "opencv", "oracle")
 
 
 @dataclass
 class RaceResult:
-    """A flown race: the report plus the trajectory for plots.
+    """A flown race: the report plus the trajectory for plots and the video frames.
 
     Attributes:
         report: the ARCHITECTURE.md race report.
         t: (T,) time, s; pos: (T, 3) world positions; speed: (T,) m/s.
-        track: the track as flown.
+        track: the track as flown (after randomisation).
+        video: list of RGB frames at the camera rate (empty unless asked for).
     """
 
     report: dict
@@ -35,6 +45,14 @@ class RaceResult:
     pos: np.ndarray
     speed: np.ndarray
     track: Track
+    video: list
+
+
+def _pilot(policy: ExportedPolicy | str, quad: QuadParams):
+    if isinstance(policy, ExportedPolicy):
+        return lambda obs, yaw: policy.act(obs)
+    ctrl = ScriptedController(quad)
+    return lambda obs, yaw: ctrl.act(obs[None, :15], np.array([yaw]))[0]
 
 
 def run_race(
@@ -43,46 +61,103 @@ def run_race(
     quad: QuadParams | None = None,
     laps: int | None = None,
     seed: int = 0,
+    detector: str = "cnn",
+    policy: str | None = "default",
     backend: str = "pybullet",
     randomize: bool = False,
+    latency_frames: int = 1,
+    video: bool = False,
 ) -> RaceResult:
-    """Fly ``track`` once with the scripted controller on ground-truth observations."""
+    """Fly ``track`` once with camera, detector, estimator and pilot in the loop.
+
+    Args:
+        detector: ``cnn[:PATH]``, ``opencv`` or ``oracle`` (true gate position, no camera).
+        policy: ``default`` (the shipped policy), a path to an exported policy, or ``scripted``.
+        backend: physics backend; the camera renders through PyBullet either way.
+        randomize: mass, thrust, wind and gate jitter from the training ranges.
+        latency_frames: camera frames between an image and its detections reaching the estimator.
+        video: keep composed video frames (FPV with detections beside a top view).
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    if latency_frames < 0:
+        raise ValueError(f"latency_frames must be >= 0, got {latency_frames}")
+    det_name, _ = parse_spec(detector)
+    if det_name not in DETECTORS:
+        raise ValueError(f"unknown detector {det_name!r}; choose cnn[:PATH], opencv or oracle")
+    if det_name != "oracle":
+        make_detector(detector)  # fail before flying if it cannot be built
     base = resolve_track(track)
     if laps is not None:
         base = base.with_laps(laps)
     quad = quad or QuadParams()
-    cfg = EnvConfig(track=base, quad=quad, randomization=RandomizationConfig(enabled=randomize))
+    pilot_spec = resolve_policy(policy)
+    obs_mode = pilot_spec.observation if isinstance(pilot_spec, ExportedPolicy) else "basic"
+    cfg = EnvConfig(
+        track=base,
+        quad=quad,
+        randomization=RandomizationConfig(enabled=randomize),
+        observation=obs_mode,
+    )
     env = make_env(backend, config=cfg)
-    controller = ScriptedController(quad)
+    camera = Camera.from_params(quad.camera)
+    scene = None
+    frames: list = []
     wall0 = time.perf_counter()
-    obs, _ = env.reset(seed=seed)
-    ts, positions, speeds = [0.0], [obs[:3].copy()], [0.0]
-    while True:
-        obs, _, term, trunc, info = env.step(controller.act_env(env, obs[None])[0])
-        ts.append(info["time"])
-        positions.append(obs[:3].copy())
-        speeds.append(float(np.linalg.norm(obs[3:6])))
-        if term or trunc:
-            break
-    wall = time.perf_counter() - wall0
-    flown = env.unwrapped.track
-    if hasattr(env, "close"):
+    try:
+        env.reset(seed=seed)
+        flown = env.unwrapped.track
+        needs_camera = det_name != "oracle" or video
+        if needs_camera:
+            from icarus_vision.render.scene import Scene
+
+            scene = Scene(flown, camera)
+        on_frame = None
+        if video:
+            from icarus_vision.racing.video import VideoComposer
+
+            composer = VideoComposer(flown, camera, scene)
+
+            def on_frame(rgb, dets, est, state):
+                frames.append(composer.compose(rgb, dets, est, state))
+
+        rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector, camera=camera,
+                       scene=scene, seed=seed, latency_frames=latency_frames, on_frame=on_frame)  # fmt: skip
+    finally:
         env.close()
-    speeds_a = np.array(speeds)
+        if scene is not None:
+            scene.close()
+    wall = time.perf_counter() - wall0
+    info = rec.info
+    speeds = np.array([0.0, *rec.speed])
     finished = bool(info["all_gates_passed"] and not info["crashed"])
+    err = np.array(rec.rel_err)
+    perception = {
+        "frames": rec.frames,
+        "detection_rate": round(rec.detected / rec.frames, 4) if rec.frames else None,
+        "rel_gate_error_m": {
+            "median": round(float(np.median(err)), 4) if err.size else None,
+            "p95": round(float(np.percentile(err, 95)), 4) if err.size else None,
+        },
+    }
+    policy_name = pilot_spec.name if isinstance(pilot_spec, ExportedPolicy) else "scripted"
+    if isinstance(pilot_spec, ExportedPolicy) and policy in (None, "default"):
+        policy_name = "default"
     report = {
         "track": base.name, "laps": base.laps, "seed": seed, "quad": quad.name,
-        "detector": None, "policy": "scripted", "backend": backend,
+        "detector": det_name, "policy": policy_name, "backend": backend,
         "finished": finished, "crashed": bool(info["crashed"]), "crash_reason": info["crash_reason"],
         "gates_total": info["gates_total"], "gates_passed": info["gates_passed"],
         "lap_times_s": [round(x, 4) for x in info["lap_times"]],
         "total_time_s": round(info["time"], 4) if finished else None,
-        "max_speed_mps": round(float(speeds_a.max()), 3),
-        "mean_speed_mps": round(float(speeds_a.mean()), 3),
+        "max_speed_mps": round(float(speeds.max()), 3),
+        "mean_speed_mps": round(float(speeds.mean()), 3),
         "sim_time_s": round(info["time"], 4), "wall_time_s": round(wall, 4),
         "realtime_factor": round(info["time"] / wall, 3) if wall > 0 else None,
-        "perception": empty_perception(),
+        "perception": perception,
         "time_optimal_s": None, "time_optimal_ratio": None,
     }  # fmt: skip
     validate_report(report)
-    return RaceResult(report, np.array(ts), np.array(positions), speeds_a, flown)
+    pos = np.array([np.asarray(flown.start_pos), *rec.pos])
+    t = np.array([0.0, *rec.t])
+    return RaceResult(report, t, pos, speeds, flown, frames)
