@@ -29,6 +29,8 @@ class ScriptedGains:
     """Carrot distance ahead of the drone's projection on the gate axis, m."""
     k_pos: float = 2.0
     """Carrot distance to speed, 1/s (the speed is min(cruise_speed, k_pos · distance))."""
+    approach_slope: float = 1.0
+    """Off-axis drones aim at least this many metres in front of the gate per metre of offset."""
     overshoot: float = 2.0
     """How far past the gate plane the carrot may go, m."""
     k_vel: float = 4.0
@@ -39,6 +41,8 @@ class ScriptedGains:
     """Attitude error to body rate, 1/s."""
     k_yaw: float = 2.0
     """Yaw error to yaw rate, 1/s."""
+    max_yaw_step: float = 1.0
+    """Largest heading error handed to the attitude loop, rad."""
 
 
 class ScriptedController:
@@ -67,7 +71,9 @@ class ScriptedController:
 
         # Carrot on the gate axis, ahead of the drone's projection on it.
         along = np.einsum("ij,ij->i", pos - gate, normal)
-        s = np.minimum(along + g.lookahead, g.overshoot)
+        offset = np.linalg.norm(pos - gate - along[:, None] * normal, axis=1)
+        # Far off the axis, keep the carrot on the entry side so the approach clears the frame.
+        s = np.minimum(np.minimum(along + g.lookahead, g.overshoot), -g.approach_slope * (offset - 0.3))
         carrot = gate + normal * s[:, None]
         to_carrot = carrot - pos
         dist = np.linalg.norm(to_carrot, axis=1, keepdims=True)
@@ -84,8 +90,12 @@ class ScriptedController:
         z_des = f / np.linalg.norm(f, axis=1, keepdims=True)
         thrust = q.mass * np.einsum("ij,ij->i", f, rot[:, :, 2])
 
-        # Desired attitude: body z along the thrust vector, heading toward the gate's direction.
-        x_c = normal
+        # Desired attitude: body z along the thrust vector, heading turning toward the gate's
+        # direction by at most max_yaw_step per call (a 180° heading error would be a singular
+        # attitude error on SO(3)).
+        yaw_err = np.angle(np.exp(1j * (gate_yaw - rpy[:, 2])))
+        heading = rpy[:, 2] + np.clip(yaw_err, -g.max_yaw_step, g.max_yaw_step)
+        x_c = np.stack((np.cos(heading), np.sin(heading), np.zeros_like(heading)), axis=1)
         y_des = cross(z_des, x_c)
         y_des /= np.maximum(np.linalg.norm(y_des, axis=1, keepdims=True), 1e-6)
         x_des = cross(y_des, z_des)

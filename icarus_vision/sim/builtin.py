@@ -8,7 +8,15 @@ from pathlib import Path
 from icarus_vision.sim.track import Track, TrackError, load_track, track_from_dict
 
 DEFAULT_TRACK = "grand-prix"
-BUILTIN_TRACKS = ("single-gate", "three-gates", "five-gates", "ten-gates", "grand-prix")
+BUILTIN_TRACKS = (
+    "single-gate",
+    "three-gates",
+    "five-gates",
+    "ten-gates",
+    "grand-prix",
+    "split-s",
+    "hairpin",
+)
 
 
 def builtin_track(name: str) -> Track:
