@@ -83,3 +83,17 @@ def test_error_text_with_brackets_is_printed_verbatim(tmp_path):
     p.write_text('name="x"\n[start]\npos=[0,0]\n[[gates]]\npos=[5,0,2]\n')
     res = runner.invoke(app, ["race", "--track", str(p), "--detector", "oracle", "--policy", "scripted"])
     assert res.exit_code == 1 and "b.toml [start]: start.pos must be a list of 3" in res.output
+
+
+def test_plan_command_and_race_reports_time_optimal(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, ["plan", "--track", "single-gate", "--json", "plan.json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "plan.json").read_text())
+    assert summary["time_optimal_s"] >= summary["point_mass_s"] > 0
+    res = runner.invoke(app, ["race", "--track", "single-gate", "--detector", "oracle", "--policy", "scripted",
+                              "--no-video", "--json", "r.json", "--out", "r"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["time_optimal_s"] == pytest.approx(summary["time_optimal_s"], abs=1e-3)
+    assert report["time_optimal_ratio"] > 1.0

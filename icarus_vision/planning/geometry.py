@@ -4,6 +4,12 @@ A gate passage is a *waypoint constraint with a tolerance inside the opening*: t
 segment ``i`` lies in passage ``i``'s gate plane (gate-frame x = 0), its crossing point lies within the
 opening shrunk by ``tol`` on every side (|y|, |z| <= size/2 − tol in the gate frame), and the velocity
 points through the gate (n·v >= ``MIN_CROSS_SPEED``), as the race rules require (x < 0 -> x >= 0).
+
+A single node in the plane does not stop an oblique crossing from clipping a bar with the drone's
+sphere, so the straight line through the crossing point along the velocity must also keep ``tol``
+from the edge over the slab |x| <= frame_width/2 + radius, where the sphere could touch the bars
+(checked at both faces of the slab; the line is linear in x, so the whole slab follows). Over those
+few tens of centimetres the flown path departs from that line by millimetres.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ class Layout:
         normals: (S, 3) world passage directions (gate-frame x).
         laterals: (S, 3) world gate-frame y axes (left).
         half_windows: (S,) allowed |y|, |z| of the crossing point in the gate frame, m.
+        slab: (S,) half-depth of the slab around the gate plane kept inside the window, m.
         nodes_per_gate: intervals per segment; segment i ends at node (i + 1) * nodes_per_gate.
         start: (3,) start position, m.
         start_yaw: start heading, rad.
@@ -46,6 +53,7 @@ class Layout:
     normals: np.ndarray
     laterals: np.ndarray
     half_windows: np.ndarray
+    slab: np.ndarray
     nodes_per_gate: int
     start: np.ndarray
     start_yaw: float
@@ -77,6 +85,23 @@ class Layout:
         gy = lat[0] * d[0] + lat[1] * d[1]
         return gx, gy, d[2]
 
+    def passage_constraints(self, i: int, pos, vel) -> list[tuple]:
+        """Constraints ``(expr, lo, hi)`` of passage ``i`` on the passage node's pos, vel (3,) each.
+
+        Works on numpy arrays and CasADi expressions alike (scalar expressions).
+        """
+        gx, gy, gz = self.gate_frame(i, pos)
+        n, lat = self.normals[i], self.laterals[i]
+        vn = n[0] * vel[0] + n[1] * vel[1]
+        vy = lat[0] * vel[0] + lat[1] * vel[1]
+        w, depth = self.half_windows[i], self.slab[i]
+        out = [(gx, 0.0, 0.0), (gy, -w, w), (gz, -w, w), (vn, MIN_CROSS_SPEED, np.inf)]
+        for s in (-depth, depth):  # the velocity line at the slab faces, multiplied by vn > 0
+            for lateral, v_lat in ((gy, vy), (gz, vel[2])):
+                out.append((lateral * vn + s * v_lat - w * vn, -np.inf, 0.0))
+                out.append((lateral * vn + s * v_lat + w * vn, 0.0, np.inf))
+        return out
+
 
 def build_layout(track: Track, quad: QuadParams, nodes_per_gate: int, tol: float) -> Layout:
     """Gate windows and bounds of ``track`` for ``quad``; PlanError when a window cannot be reached.
@@ -106,6 +131,7 @@ def build_layout(track: Track, quad: QuadParams, nodes_per_gate: int, tol: float
         normals=normals,
         laterals=laterals,
         half_windows=half,
+        slab=np.array([g.frame_width / 2.0 + quad.radius for g in passages]),
         nodes_per_gate=int(nodes_per_gate),
         start=start,
         start_yaw=math.radians(track.start_yaw_deg),
@@ -133,7 +159,9 @@ def _presolve(layout: Layout, track: Track) -> None:
         s = np.linspace(-w, w, 41)[:, None]
         pts = c + s * lat
         z_ok = c[2] - w <= layout.pos_hi[2] and c[2] + w >= layout.pos_lo[2]
-        xy_ok = np.any(np.all((pts[:, :2] >= layout.pos_lo[:2]) & (pts[:, :2] <= layout.pos_hi[:2]), axis=1))
+        xy_ok = np.any(
+            np.all((pts[:, :2] >= layout.pos_lo[:2]) & (pts[:, :2] <= layout.pos_hi[:2]), axis=1)
+        )
         if not (z_ok and xy_ok):
             raise PlanError(
                 "Presolve_Infeasible",

@@ -25,8 +25,15 @@ from icarus_vision.sim.quad import QuadParams
 from icarus_vision.sim.registration import BACKENDS, make_env
 from icarus_vision.sim.track import Track
 
-
 DETECTORS = ("cnn", "opencv", "oracle")
+PLAN_CACHE = "runs/plans"
+
+
+def time_optimal(track: Track, quad: QuadParams, cache_dir: str = PLAN_CACHE) -> float | None:
+    """The minimum time of (track, quad) from the `plan` cache, or None when none was planned."""
+    from icarus_vision.planning.command import plan_time_for_race
+
+    return plan_time_for_race(track, quad, cache_dir)
 
 
 @dataclass
@@ -157,6 +164,11 @@ def run_race(
         "perception": perception,
         "time_optimal_s": None, "time_optimal_ratio": None,
     }  # fmt: skip
+    optimal = time_optimal(base, quad)
+    if optimal is not None:
+        report["time_optimal_s"] = round(optimal, 4)
+        if finished:
+            report["time_optimal_ratio"] = round(info["time"] / optimal, 4)
     validate_report(report)
     pos = np.array([np.asarray(flown.start_pos), *rec.pos])
     t = np.array([0.0, *rec.t])

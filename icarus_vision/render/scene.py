@@ -16,13 +16,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import pybullet as p
 
 from icarus_vision.render.backdrop import paint_backdrop, ray_norms, shade_factor
 from icarus_vision.render.camera import TINY_RENDERER_SAMPLE_OFFSET, Camera
 from icarus_vision.render.meshes import Mesh, box_mesh, frame_mesh, gate_mesh
 from icarus_vision.render.style import DISTRACTOR_SHAPES, Distractor, Frame, Lighting, SceneStyle
 from icarus_vision.render.textures import Material, texture_image
+from icarus_vision.sim.bullet import p
 from icarus_vision.sim.track import Track
 
 __all__ = ["DISTRACTOR_SHAPES", "Distractor", "Frame", "Lighting", "Scene", "SceneStyle"]
@@ -191,7 +191,7 @@ class Scene:
             renderer=renderer,
             physicsClientId=self.client,
         )
-        rgb = np.array(rgba, dtype=np.uint8).reshape(h, w, 4)[..., :3].copy()
+        rgb = cv2.cvtColor(np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4), cv2.COLOR_RGBA2RGB)
         seg = np.array(seg, dtype=np.int32).reshape(h, w)
         z = cam.depth_to_z(np.asarray(depth, dtype=np.float32).reshape(h, w)).astype(np.float32)
         if cam not in self._rays:
