@@ -34,6 +34,9 @@ def train_policy_cmd(
         False, "--resume", help="Continue the run in --out from its last checkpoint."
     ),
     error_model: Path = typer.Option(None, help="Detector error model JSON for perception noise."),
+    max_minutes: float = typer.Option(
+        None, min=0.0, help="Stop (and save) after this much wall-clock training."
+    ),
 ) -> None:
     """Train a racing policy with PPO (progress bar, TensorBoard logs under OUT/tb, Ctrl-C saves)."""
     from icarus_vision.policy.config import PRESETS, load_train_config

@@ -73,7 +73,9 @@ class ScriptedController:
         along = np.einsum("ij,ij->i", pos - gate, normal)
         offset = np.linalg.norm(pos - gate - along[:, None] * normal, axis=1)
         # Far off the axis, keep the carrot on the entry side so the approach clears the frame.
-        s = np.minimum(np.minimum(along + g.lookahead, g.overshoot), -g.approach_slope * (offset - 0.3))
+        s = np.minimum(
+            np.minimum(along + g.lookahead, g.overshoot), -g.approach_slope * (offset - 0.3)
+        )
         carrot = gate + normal * s[:, None]
         to_carrot = carrot - pos
         dist = np.linalg.norm(to_carrot, axis=1, keepdims=True)

@@ -102,8 +102,15 @@ def train_policy(
     timesteps: int | None = None,
     progress=None,
     verbose: int = 1,
+    max_wall_s: float | None = None,
 ) -> TrainResult:
-    """Train (or resume) a racing policy. ``progress(timesteps, curriculum)`` is called every step."""
+    """Train (or resume) a racing policy.
+
+    Args:
+        timesteps: total environment steps (counting those of a resumed run).
+        progress: ``f(timesteps, curriculum)`` called every step.
+        max_wall_s: stop (and save) once training has used this much wall-clock time in total.
+    """
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -181,6 +188,8 @@ def train_policy(
             self.next_eval = model.num_timesteps + cfg.eval_every
 
         def _on_step(self) -> bool:
+            if max_wall_s is not None and metrics.elapsed() >= max_wall_s:
+                return False
             if self.num_timesteps >= self.next_eval:
                 self.next_eval += cfg.eval_every
                 n = curriculum.num_gates
