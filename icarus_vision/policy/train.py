@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from icarus_vision.fileio import atomic_write_json
+from icarus_vision.fileio import atomic_write_json, publish
 from icarus_vision.policy.callbacks import (
     CurriculumCallback,
     MetricsCallback,
@@ -87,7 +87,7 @@ def _save_checkpoint(model, ckpt_dir: Path, state: dict) -> None:
     os.close(fd)
     try:
         model.save(tmp)
-        os.replace(tmp, ckpt_dir / "last.zip")
+        publish(tmp, ckpt_dir / "last.zip")
     finally:
         Path(tmp).unlink(missing_ok=True)
     atomic_write_json(ckpt_dir / "last_state.json", state)

@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from icarus_vision.fileio import publish
 from icarus_vision.render.camera import Camera
 from icarus_vision.sim.track import Track
 
@@ -120,6 +121,6 @@ def write_video(path: str | os.PathLike, frames: list[np.ndarray], fps: float) -
         with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=16) as w:
             for f in frames:
                 w.append_data(f)
-        os.replace(tmp, path)
+        publish(tmp, path)
     finally:
         Path(tmp).unlink(missing_ok=True)
