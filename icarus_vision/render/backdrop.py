@@ -79,6 +79,7 @@ def paint_backdrop(
         a = r[2, 0] / k[0, 0]
         b = r[2, 1] / k[1, 1]
         c = r[2, 2] - a * k[0, 2] - b * k[1, 2]
+        a, b = np.float32(a), np.float32(b)  # keep the per-pixel maths in float32
         dz = (a * np.arange(w, dtype=np.float32))[None, :] + (b * np.arange(h, dtype=np.float32))[
             :, None
         ]
@@ -100,18 +101,24 @@ def paint_backdrop(
     warped = cv2.warpPerspective(
         ground_tex, crop @ tex_to_img @ shift, (w, r1 - r0), flags=cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_WRAP,
-    ).astype(np.float32)  # fmt: skip
+    )  # fmt: skip
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = np.float32(1.0) / dzs
         # Metres per pixel on the ground over a quarter tile, minus one: > 0 => fade to the mean.
-        fade = np.float32(4.0 * t[2] / (k[0, 0] * ground_tile_m)) * norms[r0:r1] * inv * inv
+        fade = norms[r0:r1] * inv
+        fade *= inv
+        fade *= np.float32(4.0 * t[2] / (k[0, 0] * ground_tile_m))
     fade -= 1.0
     np.clip(fade, 0.0, 1.0, out=fade)
-    mean = ground_tex.reshape(-1, 3).mean(axis=0).astype(np.float32)
-    warped += (mean - warped) * fade[..., None]
-    warped *= np.asarray(ground_gain, dtype=np.float32)
-    warped += np.float32(0.5)
-    np.minimum(warped, np.float32(255.0), out=warped)
-    cv2.copyTo(warped.astype(np.uint8), g.view(np.uint8), rgb[r0:r1])
+    # Fade only the band of rows that needs it (near the horizon); then the light's gain.
+    band = np.flatnonzero(fade.max(axis=1) > 0.0)
+    if len(band):
+        b0, b1 = int(band[0]), int(band[-1]) + 1
+        mean = np.empty_like(warped[b0:b1])
+        mean[:] = np.round(ground_tex.reshape(-1, 3).mean(axis=0)).astype(np.uint8)
+        f = fade[b0:b1].astype(np.float32, copy=False)
+        warped[b0:b1] = cv2.blendLinear(warped[b0:b1], mean, np.float32(1.0) - f, f)
+    gain = tuple(float(x) for x in ground_gain) + (0.0,)
+    cv2.copyTo(cv2.multiply(warped, gain), g.view(np.uint8), rgb[r0:r1])
     seg[r0:r1][g] = GROUND_ID
     depth[r0:r1][g] = (np.float32(-t[2]) * inv)[g]

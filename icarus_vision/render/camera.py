@@ -187,8 +187,10 @@ def gl_view_matrix(r_world_cam: np.ndarray, t_world_cam: np.ndarray) -> np.ndarr
 
 def depth_buffer_to_z(buffer: np.ndarray, near: float, far: float) -> np.ndarray:
     """PyBullet's non-linear depth buffer in [0, 1] -> metric depth z along the optical axis."""
-    b = np.asarray(buffer, dtype=np.float64)
-    return far * near / (far - (far - near) * b)
+    b = np.array(buffer, dtype=np.float64)  # a copy, then in place: far - (far - near) * b
+    b *= -(far - near)
+    b += far
+    return np.divide(far * near, b, out=b)
 
 
 @dataclass(frozen=True)

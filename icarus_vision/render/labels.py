@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from icarus_vision.render.camera import Camera, project_points, world_to_camera
+from icarus_vision.render.frustum import spheres_in_view
 from icarus_vision.sim.track import SAME_GATE_TOL, Gate, Track
 
 VISIBLE, HIDDEN, OUTSIDE = 2, 1, 0
@@ -63,15 +64,13 @@ def facing_passage(track: Track, gate: Gate, cam_pos: np.ndarray) -> int | None:
 
     Returns None when the camera sees the gate from no passage's approach side.
     """
-    best, best_x = None, 0.0
-    for i, g in enumerate(track.gates):
-        if np.linalg.norm(np.subtract(g.pos, gate.pos)) >= SAME_GATE_TOL:
-            continue
-        x = float(np.dot(np.asarray(cam_pos) - np.asarray(g.pos), g.normal))
-        d = max(float(np.linalg.norm(np.asarray(cam_pos) - np.asarray(g.pos))), 1e-9)
-        if x / d < best_x:
-            best, best_x = i, x / d
-    return best
+    pos = np.array([g.pos for g in track.gates], dtype=float)
+    normals = np.array([g.normal for g in track.gates])
+    rel = np.asarray(cam_pos, dtype=float) - pos
+    cos = np.einsum("ij,ij->i", rel, normals) / np.maximum(np.linalg.norm(rel, axis=1), 1e-9)
+    cos[np.linalg.norm(pos - np.asarray(gate.pos), axis=1) >= SAME_GATE_TOL] = np.inf
+    best = int(np.argmin(cos))  # the passage seen most head-on (the first one on ties)
+    return best if cos[best] < 0.0 else None
 
 
 def corner_visibility(
@@ -121,6 +120,7 @@ def gate_labels(
     depth: np.ndarray,
     gate_bodies: tuple[int, ...],
     frame_width: float | None = None,
+    physical_gates: tuple[Gate, ...] | None = None,
 ) -> list[GateLabel]:
     """Labels of every gate whose opening faces the camera, lies in front of it and shows in the image.
 
@@ -132,6 +132,7 @@ def gate_labels(
         depth: (H, W) metric depth of the frame, m.
         gate_bodies: body id of each physical gate, ``track.physical_gates()`` order.
         frame_width: rendered bar width when the scene overrode it (None: each gate's own).
+        physical_gates: ``track.physical_gates()`` when the caller has it already.
 
     Returns:
         labels sorted by distance, nearest first.
@@ -139,7 +140,15 @@ def gate_labels(
     r_wc, t_wc = camera.pose(pos, quat)
     k = camera.K
     labels = []
-    for gid, gate in enumerate(track.physical_gates()):
+    gates = track.physical_gates() if physical_gates is None else physical_gates
+    # Skip the gates that cannot show in the image (bounding sphere outside the view pyramid).
+    fws = np.array([frame_width or g.frame_width for g in gates])
+    radii = math.sqrt(2.0) * (np.array([g.size for g in gates]) / 2.0 + fws) + fws
+    centres = np.array([g.pos for g in gates], dtype=float)
+    in_view = spheres_in_view(camera, r_wc[None], t_wc[None], centres, radii)[0]
+    for gid, gate in enumerate(gates):
+        if not in_view[gid]:
+            continue
         passage = facing_passage(track, gate, t_wc)
         if passage is None:
             continue
@@ -214,4 +223,5 @@ def frame_labels(scene, frame, pos: np.ndarray, quat: np.ndarray, camera: Camera
         frame.depth,
         scene.gate_bodies,
         scene.style.frame_width,
+        scene.gates,
     )

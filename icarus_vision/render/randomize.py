@@ -228,6 +228,10 @@ def apply_sensor_noise(rgb: np.ndarray, noise: SensorNoise, rng: np.random.Gener
         lut = np.clip(255.0 * noise.gain * (np.arange(256) / 255.0) ** noise.gamma, 0, 255)
         img = cv2.LUT(img, np.round(lut).astype(np.uint8))
     if noise.noise_std > 0.0:
-        n = rng.standard_normal(img.shape, dtype=np.float32) * np.float32(noise.noise_std)
-        img = np.clip(img.astype(np.float32) + n + 0.5, 0, 255).astype(np.uint8)
+        # OpenCV's normal generator, seeded from rng, is about 3x faster than numpy's here.
+        img = np.ascontiguousarray(img)
+        n = np.empty((img.shape[0], img[0].size), np.float32)
+        cv2.setRNGSeed(int(rng.integers(2**31)))
+        cv2.randn(n, 0.0, float(noise.noise_std))
+        img = cv2.add(img.reshape(n.shape), n, dtype=cv2.CV_8U).reshape(img.shape)
     return np.ascontiguousarray(img)

@@ -1,7 +1,8 @@
 """Visual domain-randomisation recipe: frozen dataclasses of ranges, loaded from TOML.
 
 A recipe file (e.g. ``datasets/gates-v1.toml``) has one table per dataclass below: ``[gates]``,
-``[ground]``, ``[sky]``, ``[light]``, ``[distractors]``, ``[camera]``, ``[sensor]``, plus a top-level
+``[ground]``, ``[sky]``, ``[light]``, ``[distractors]``, ``[camera]``, ``[sensor]``, the geometry
+of the frames (``[tracks]``, ``[poses]``), the dataset layout (``[dataset]``), plus a top-level
 ``name``. Missing keys take the defaults; an unknown key or a bad value raises ValueError naming the
 key and the file. Ranges are ``[low, high]`` and are sampled uniformly.
 """
@@ -126,6 +127,68 @@ class SensorRanges:
 
 
 @dataclass(frozen=True)
+class TrackRanges:
+    """Random track layouts (:func:`icarus_vision.sim.random_track.random_track`); one per scene."""
+
+    gates: tuple[int, int] = (3, 10)
+    """Number of gates per track, inclusive range."""
+    spacing: Range = (4.0, 8.0)
+    """Distance between consecutive gates, m."""
+    max_turn_deg: float = 60.0
+    """Largest change of direction from one gate to the next, degrees."""
+    height: Range = (1.0, 3.0)
+    """Height of the gate centres above the ground, m."""
+    size: Range = (1.0, 1.0)
+    """Side of the square inner opening, m (one draw per track)."""
+
+
+@dataclass(frozen=True)
+class PoseRanges:
+    """Racing-like camera poses: the drone on its way to a gate (:mod:`icarus_vision.render.poses`)."""
+
+    distance: Range = (0.5, 15.0)
+    """Distance from the camera to the centre of the gate it approaches, m (drawn uniformly)."""
+    racing_line_prob: float = 0.5
+    """Probability of a pose on the straight line from the previous gate (or the start) to the
+    target gate, offset by ``lateral_std``; otherwise the pose lies in the approach cone below."""
+    lateral_std: float = 0.5
+    """Standard deviation of the sideways and vertical offsets from the racing line, m."""
+    approach_azimuth_deg: Range = (-50.0, 50.0)
+    """Approach cone: horizontal angle between the gate's passage axis and the camera's bearing
+    from the gate (on the approach side), degrees."""
+    approach_elevation_deg: Range = (-10.0, 30.0)
+    """Approach cone: elevation of the camera seen from the gate's centre, degrees."""
+    aim_offset_deg: Range = (0.0, 40.0)
+    """Angle between the direction the camera is aimed at and the gate's centre, degrees; large
+    values put the gate at or across the image border."""
+    roll_deg: Range = (-45.0, 45.0)
+    """Body roll, degrees."""
+    pitch_deg: Range = (-45.0, 45.0)
+    """Body pitch limits (positive: nose down), degrees; the pitch that aims the camera is clipped
+    to them."""
+    height: Range = (0.3, 6.0)
+    """Allowed camera height above the ground, m; positions are clamped into it."""
+    no_gate_prob: float = 0.1
+    """Share of frames drawn to show no gate at all (the camera looks away from every gate)."""
+
+
+@dataclass(frozen=True)
+class DatasetSettings:
+    """Layout of a generated dataset (``icarus-vision gen-dataset``)."""
+
+    width: int = 320
+    """Image width, pixels."""
+    height: int = 240
+    """Image height, pixels."""
+    splits: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    """Fractions of the images in the ``train``, ``val`` and ``test`` splits (sum 1)."""
+    shard_size: int = 100
+    """Images per shard, the unit of parallel work, checksums and resuming."""
+    frames_per_scene: int = 20
+    """Frames rendered from one scene (one random track, look and camera) before the next."""
+
+
+@dataclass(frozen=True)
 class Recipe:
     """A visual domain-randomisation recipe (one per dataset)."""
 
@@ -145,6 +208,12 @@ class Recipe:
     """Camera FOV, uptilt and roll jitter."""
     sensor: SensorRanges = field(default_factory=SensorRanges)
     """Sensor noise."""
+    tracks: TrackRanges = field(default_factory=TrackRanges)
+    """Random track layouts."""
+    poses: PoseRanges = field(default_factory=PoseRanges)
+    """Camera poses."""
+    dataset: DatasetSettings = field(default_factory=DatasetSettings)
+    """Resolution, splits and sharding of a generated dataset."""
 
     def to_dict(self) -> dict:
         """Plain nested dict (JSON-ready) of the resolved recipe."""
@@ -170,6 +239,10 @@ def _convert(tp, v, key: str, source: str):
         return v
     if tp is float:
         return _number(v, key, source)
+    if tp is int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise _fail(source, key, f"must be an integer, got {v!r}")
+        return v
     if origin is tuple:
         if not isinstance(v, list | tuple):
             raise _fail(source, key, f"must be a list, got {v!r}")
@@ -241,8 +314,40 @@ def _validate(obj, prefix: str, source: str) -> None:
                 )
         if obj.tile[0] <= 0 or obj.frame_width[0] <= 0:
             raise _fail(source, f"{prefix}tile/frame_width", "must be > 0")
+    _validate_geometry(obj, prefix, source)
     if isinstance(obj, CameraJitter) and not (0 < obj.hfov_deg[0] and obj.hfov_deg[1] < 170):
         raise _fail(source, f"{prefix}hfov_deg", f"must lie in (0, 170), got {list(obj.hfov_deg)}")
+
+
+def _validate_geometry(obj, prefix: str, source: str) -> None:
+    """Checks of the ``[tracks]``, ``[poses]`` and ``[dataset]`` sections."""
+    if isinstance(obj, TrackRanges):
+        if obj.gates[0] < 1:
+            raise _fail(source, f"{prefix}gates", f"must be >= 1, got {list(obj.gates)}")
+        if obj.spacing[0] < 3.0:
+            raise _fail(source, f"{prefix}spacing", "must be >= 3 m (gates stay 3 m apart)")
+        if obj.size[0] <= 0:
+            raise _fail(source, f"{prefix}size", "must be > 0")
+    if isinstance(obj, PoseRanges):
+        if obj.distance[0] <= 0 or obj.height[0] <= 0 or obj.lateral_std < 0:
+            raise _fail(source, f"{prefix}distance/height/lateral_std", "must be > 0")
+        for name in ("roll_deg", "pitch_deg"):
+            lo, hi = getattr(obj, name)
+            if not (-90.0 < lo and hi < 90.0):
+                raise _fail(source, f"{prefix}{name}", "must lie in (-90, 90)")
+    if isinstance(obj, DatasetSettings):
+        for name in ("width", "height"):
+            if not 8 <= getattr(obj, name) <= 4096:
+                raise _fail(source, f"{prefix}{name}", "must lie in [8, 4096]")
+        for name in ("shard_size", "frames_per_scene"):
+            if getattr(obj, name) < 1:
+                raise _fail(source, f"{prefix}{name}", "must be >= 1")
+        if any(x < 0 for x in obj.splits) or abs(sum(obj.splits) - 1.0) > 1e-6:
+            raise _fail(
+                source,
+                f"{prefix}splits",
+                f"need 3 fractions >= 0 summing to 1, got {list(obj.splits)}",
+            )
 
 
 def recipe_from_dict(data: dict, source: str = "<memory>") -> Recipe:
