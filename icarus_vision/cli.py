@@ -32,7 +32,10 @@ def user_errors(fn):
             return fn(*args, **kwargs)
         except (ValueError, FileNotFoundError, RuntimeError) as e:
             err_console.print(
-                f"[bold red]error:[/] {escape(str(e))}", markup=True, highlight=False, soft_wrap=True
+                f"[bold red]error:[/] {escape(str(e))}",
+                markup=True,
+                highlight=False,
+                soft_wrap=True,
             )
             raise typer.Exit(1) from None
         except KeyboardInterrupt:

@@ -74,14 +74,18 @@ def test_race_bad_input_is_one_line_error(args, msg, tmp_path):
 def test_bad_track_file_names_file_and_gate(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text('name="x"\n[start]\npos=[0,0,0.2]\n[[gates]]\npos=[5,0,2]\nsize=0.0\n')
-    res = runner.invoke(app, ["race", "--track", str(p), "--detector", "oracle", "--policy", "scripted"])
+    res = runner.invoke(
+        app, ["race", "--track", str(p), "--detector", "oracle", "--policy", "scripted"]
+    )
     assert res.exit_code == 1 and "bad.toml gate 0: size must be > 0" in res.output
 
 
 def test_error_text_with_brackets_is_printed_verbatim(tmp_path):
     p = tmp_path / "b.toml"
     p.write_text('name="x"\n[start]\npos=[0,0]\n[[gates]]\npos=[5,0,2]\n')
-    res = runner.invoke(app, ["race", "--track", str(p), "--detector", "oracle", "--policy", "scripted"])
+    res = runner.invoke(
+        app, ["race", "--track", str(p), "--detector", "oracle", "--policy", "scripted"]
+    )
     assert res.exit_code == 1 and "b.toml [start]: start.pos must be a list of 3" in res.output
 
 

@@ -24,14 +24,18 @@ def test_race_single_gate_oracle_report_has_every_field(backend):
 
 
 def test_laps_override_counts_passages():
-    r = run_race("single-gate", laps=2, backend="batched", detector="oracle", policy="scripted").report
+    r = run_race(
+        "single-gate", laps=2, backend="batched", detector="oracle", policy="scripted"
+    ).report
     assert r["laps"] == 2 and r["gates_total"] == 2
 
 
 def test_video_frames_are_written_and_decode(tmp_path):
     import imageio.v3 as iio
 
-    res = run_race("single-gate", backend="batched", detector="oracle", policy="scripted", video=True)
+    res = run_race(
+        "single-gate", backend="batched", detector="oracle", policy="scripted", video=True
+    )
     assert len(res.video) >= 30
     h, w, _ = res.video[0].shape
     write_video(tmp_path / "race.mp4", res.video, 30.0)
@@ -51,7 +55,10 @@ def test_video_frames_are_written_and_decode(tmp_path):
     [
         ({"detector": "lidar"}, "lidar"),
         ({"backend": "mujoco"}, "unknown backend"),
-        ({"policy": "missing_policy.safetensors"}, "missing_policy.safetensors: policy file not found"),
+        (
+            {"policy": "missing_policy.safetensors"},
+            "missing_policy.safetensors: policy file not found",
+        ),
         ({"latency_frames": -1}, "latency_frames"),
     ],
 )
