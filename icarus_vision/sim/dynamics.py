@@ -218,8 +218,8 @@ def lag_gain(dt: float, tau: float) -> float:
 
 def drag_force(rot: np.ndarray, vel: np.ndarray, wind: np.ndarray, drag: np.ndarray) -> np.ndarray:
     """World-frame drag force (N, 3) on the airspeed, with drag diagonal in the body frame."""
-    air_b = np.einsum("nji,nj->ni", rot, vel - wind)
-    return np.einsum("nij,nj->ni", rot, -drag * air_b)
+    air_b = np.matmul((vel - wind)[:, None, :], rot)  # (N, 1, 3): Rᵀ (v − w) as a row
+    return np.matmul(rot, (air_b * -drag).transpose(0, 2, 1))[:, :, 0]
 
 
 def body_wrench(
@@ -247,7 +247,7 @@ def body_wrench(
     j = params.inertia
     jw = state.omega * j
     torque = j * (rate_cmd - state.omega) * (k / dt) + cross(state.omega, jw)
-    return thrust, force, np.einsum("nij,nj->ni", rot, torque)
+    return thrust, force, np.matmul(rot, torque[:, :, None])[:, :, 0]
 
 
 def step_substeps(

@@ -109,8 +109,8 @@ def gate_passage(p0: np.ndarray, p1: np.ndarray, gate_pos, gate_yaw, size) -> np
     Returns:
         (N,) bool.
     """
-    l0 = to_gate_frame(p0, gate_pos[:, None], gate_yaw[:, None])[:, 0]
-    l1 = to_gate_frame(p1, gate_pos[:, None], gate_yaw[:, None])[:, 0]
+    both = to_gate_frame(np.stack((p0, p1), axis=1), gate_pos[:, None], gate_yaw[:, None])
+    l0, l1 = both[:, 0], both[:, 1]
     crossed = (l0[:, 0] < 0.0) & (l1[:, 0] >= 0.0)
     denom = np.where(crossed, l1[:, 0] - l0[:, 0], 1.0)
     t = np.clip(-l0[:, 0] / denom, 0.0, 1.0)
