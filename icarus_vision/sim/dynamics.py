@@ -244,9 +244,10 @@ def body_wrench(
     thrust = state.thrust + (thrust_cmd - state.thrust) * k
     rot = quat_to_rot(state.quat) if rot is None else rot
     force = rot[:, :, 2] * thrust[:, None] + drag_force(rot, state.vel, wind, params.drag)
-    j = params.inertia
-    jw = state.omega * j
-    torque = j * (rate_cmd - state.omega) * (k / dt) + cross(state.omega, jw)
+    j, w = params.inertia, state.omega
+    # ω × Jω for a diagonal J: ((Jz − Jy) ωy ωz, (Jx − Jz) ωz ωx, (Jy − Jx) ωx ωy)
+    gyro = (j[_C2] - j[_C1]) * w[:, _C1] * w[:, _C2]
+    torque = j * (rate_cmd - w) * (k / dt) + gyro
     return thrust, force, np.matmul(rot, torque[:, :, None])[:, :, 0]
 
 

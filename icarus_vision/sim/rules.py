@@ -109,9 +109,14 @@ def gate_passage(p0: np.ndarray, p1: np.ndarray, gate_pos, gate_yaw, size) -> np
     Returns:
         (N,) bool.
     """
+    c, s = np.cos(gate_yaw), np.sin(gate_yaw)
+    x0 = c * (p0[:, 0] - gate_pos[:, 0]) + s * (p0[:, 1] - gate_pos[:, 1])
+    x1 = c * (p1[:, 0] - gate_pos[:, 0]) + s * (p1[:, 1] - gate_pos[:, 1])
+    crossed = (x0 < 0.0) & (x1 >= 0.0)
+    if not crossed.any():  # the common case: nobody reached a gate plane this step
+        return crossed
     both = to_gate_frame(np.stack((p0, p1), axis=1), gate_pos[:, None], gate_yaw[:, None])
     l0, l1 = both[:, 0], both[:, 1]
-    crossed = (l0[:, 0] < 0.0) & (l1[:, 0] >= 0.0)
     denom = np.where(crossed, l1[:, 0] - l0[:, 0], 1.0)
     t = np.clip(-l0[:, 0] / denom, 0.0, 1.0)
     hit = l0[:, 1:] + t[:, None] * (l1[:, 1:] - l0[:, 1:])
