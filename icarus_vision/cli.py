@@ -46,12 +46,14 @@ def user_errors(fn):
 
 
 # Each command lives in its own module under icarus_vision/commands/ and registers itself on `app`.
+from icarus_vision.commands import eval_detector as _eval_detector  # noqa: E402,F401
 from icarus_vision.commands import eval_estimator as _eval_estimator  # noqa: E402,F401
 from icarus_vision.commands import eval_policy as _eval_policy  # noqa: E402,F401
 from icarus_vision.commands import gen_dataset as _gen_dataset  # noqa: E402,F401
 from icarus_vision.commands import plan as _plan  # noqa: E402,F401
 from icarus_vision.commands import race as _race  # noqa: E402,F401
 from icarus_vision.commands import tracks as _tracks  # noqa: E402,F401
+from icarus_vision.commands import train_detector as _train_detector  # noqa: E402,F401
 from icarus_vision.commands import train_policy as _train_policy  # noqa: E402,F401
 
 

@@ -112,7 +112,7 @@ def evaluate_estimator(
     name, _ = parse_spec(detector)
     det: Detector | None = None
     if name != "oracle":
-        det = make_detector(detector)  # fails early with "detector X is not available yet"
+        det = make_detector(detector)  # fails early on an unknown name or missing weights
         if not render:
             raise ValueError(f"detector {name} needs rendered frames (render=True)")
     base = resolve_track(track)

@@ -36,8 +36,10 @@ def test_deterministic_and_map_free():
     assert a["finished"] and a["within_5m"]["median"] < 0.1
 
 
-def test_unavailable_detector_is_a_clear_error():
-    with pytest.raises(ValueError, match="detector cnn is not available yet"):
+def test_unknown_detector_or_missing_weights_are_clear_errors():
+    with pytest.raises(ValueError, match="unknown detector 'nosuch'"):
+        evaluate_estimator("single-gate", "nosuch", render=False)
+    with pytest.raises(FileNotFoundError, match="weights.safetensors"):
         evaluate_estimator("single-gate", "cnn:weights.safetensors", render=False)
 
 
@@ -58,7 +60,7 @@ def test_cli_writes_report_and_plot(tmp_path):
 
 
 def test_cli_errors_are_one_line():
-    res = CliRunner().invoke(app, ["eval-estimator", "--detector", "opencv"])
+    res = CliRunner().invoke(app, ["eval-estimator", "--detector", "nosuch"])
     assert res.exit_code == 1
-    assert "detector opencv is not available yet" in res.output
+    assert "unknown detector 'nosuch'" in res.output
     assert "Traceback" not in res.output

@@ -114,6 +114,6 @@ def test_oracle_reads_visibility_from_a_rendered_frame():
         scene.close()
 
 
-def test_unknown_image_detector_is_not_available():
-    with pytest.raises(ValueError, match="detector opencv is not available yet"):
-        make_detector("opencv")
+def test_unknown_image_detector_lists_the_known_ones():
+    with pytest.raises(ValueError, match="unknown detector .nosuch.; choose one of .*cnn.*opencv"):
+        make_detector("nosuch")

@@ -1,0 +1,83 @@
+"""Gate-detector speed and accuracy: ms per frame on one core, and the eval-detector figures.
+
+Usage::
+
+    icarus-vision gen-dataset --recipe datasets/gates-v1.toml --out datasets/gates-v1-test \\
+        --num-images 3000 --seed 1          # held out: the shipped CNN was trained on seed 0
+    python benchmarks/detector.py [--data datasets/gates-v1-test] [--detectors cnn opencv]
+                                  [--limit N] [--json PATH]
+
+For each detector: the test-split figures of ``eval_detector`` (precision, recall, corner error,
+PCK, by distance) and a latency run: ``detect`` on the first 50 test frames, 5 passes, PyTorch and
+OpenCV on one thread, reporting the median and 95th percentile ms per frame. Prints a table and
+one JSON object (also written to ``--json``). The machine's 1-minute load average is recorded:
+timings on a busy machine are slower than on an idle core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.evaluate import eval_detector, one_thread
+
+DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v1-test"
+
+
+def latency(spec: str, data: Path, frames: int = 50, passes: int = 5) -> dict:
+    """Median and p95 ms per ``detect`` call on one thread."""
+    det = make_detector(spec)
+    split = load_split(data, "test", None, frames)
+    images = [read_rgb(f) for f in split.files]
+    times = []
+    with one_thread():
+        for im in images[:5]:
+            det.detect(im)  # warm-up
+        for _ in range(passes):
+            for im in images:
+                t0 = time.perf_counter()
+                det.detect(im)
+                times.append(1000.0 * (time.perf_counter() - t0))
+    return {"median_ms": round(float(np.median(times)), 3),
+            "p95_ms": round(float(np.percentile(times, 95)), 3)}  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--detectors", nargs="+", default=["cnn", "opencv"])
+    ap.add_argument("--limit", type=int, default=None, help="Evaluate the first N test images.")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    if not (args.data / "annotations" / "test.json").is_file():
+        sys.exit(f"{args.data}: no dataset; generate it first (see this script's docstring)")
+    out = {"data": str(args.data), "load_avg_1min": round(os.getloadavg()[0], 2), "detectors": {}}
+    for spec in args.detectors:
+        r = eval_detector(args.data, spec, limit=args.limit)
+        keep = ("images", "gates", "min_gate_px", "precision", "recall", "corner_error_px", "pck",
+                "ms_per_frame", "by_distance", "by_size")  # fmt: skip
+        out["detectors"][spec] = {k: r[k] for k in keep} | {"latency": latency(spec, args.data)}
+    print(f"{'detector':10} {'gates':>6} {'prec':>6} {'recall':>6} {'med px':>7} {'mean px':>7} "
+          f"{'PCK2':>6} {'PCK5':>6} {'ms p50':>7} {'ms p95':>7}")  # fmt: skip
+    for spec, r in out["detectors"].items():
+        f = [r["precision"], r["recall"], r["corner_error_px"]["median"],
+             r["corner_error_px"]["mean"], r["pck"]["2px"], r["pck"]["5px"]]  # fmt: skip
+        cells = " ".join(f"{'-' if x is None else f'{x:.3f}':>6}" for x in f)
+        lat = r["latency"]
+        print(f"{spec:10} {r['gates']:>6} {cells} {lat['median_ms']:>7.2f} {lat['p95_ms']:>7.2f}")
+    print(json.dumps(out))
+    if args.json is not None:
+        args.json.write_text(json.dumps(out, indent=2))
+    return out
+
+
+if __name__ == "__main__":
+    main()

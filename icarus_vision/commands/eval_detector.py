@@ -1,0 +1,72 @@
+"""`icarus-vision eval-detector`: detector accuracy and speed on a dataset's test split."""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from icarus_vision.cli import app, console, user_errors
+
+
+def _fmt(x) -> str:
+    return "-" if x is None else f"{x:.3f}" if isinstance(x, float) else str(x)
+
+
+def _span(b: dict) -> str:
+    if b["min"] == "all":
+        return "all"
+    return f"{b['min']:g}-" + ("" if b["max"] is None else f"{b['max']:g}")
+
+
+@app.command("eval-detector")
+@user_errors
+def eval_detector_cmd(
+    data: Path = typer.Option(..., help="gen-dataset output folder (its test split is used)."),
+    detector: str = typer.Option("cnn", help="cnn (shipped), cnn:PATH (checkpoint) or opencv."),
+    json_path: Path = typer.Option(None, "--json", help="Write the report to this JSON file."),
+    error_model: Path = typer.Option(
+        None, help="Write the error model here (default: beside --json, .error_model.json)."
+    ),
+    min_gate_px: float = typer.Option(20.0, help="Smallest counted gate (mean side), pixels."),
+    limit: int = typer.Option(None, min=1, help="Evaluate only the first N test images."),
+) -> None:
+    """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size.
+
+    Also writes the detector's error model (gate-centre error and miss rate by distance) for
+    `train-policy`'s perception noise.
+    """
+    from icarus_vision.gate_detect.evaluate import eval_detector
+
+    with ExitStack() as stack:
+        bar = task = None
+
+        def progress(done: int, total: int) -> None:
+            nonlocal bar, task
+            if bar is None:
+                cols = (TextColumn("[bold]eval-detector"), BarColumn(), MofNCompleteColumn(),
+                        TimeElapsedColumn())  # fmt: skip
+                bar = stack.enter_context(Progress(*cols, console=console, transient=True))
+                task = bar.add_task("images", total=total)
+            bar.update(task, completed=done)
+
+        r = eval_detector(data, detector, json_path, error_model, min_gate_px, limit=limit,
+                          progress=progress)  # fmt: skip
+    table = Table(title=f"{r['detector']} on {r['images']} images, {r['gates']} gates >= "
+                  f"{r['min_gate_px']:g} px")  # fmt: skip
+    for col in ("distance m", "gates", "precision", "recall", "median px", "PCK@2", "PCK@5"):
+        table.add_column(col, justify="right")
+    for b in [{"min": "all", "max": None, **r}, *r["by_distance"]]:
+        table.add_row(_span(b), str(b["gates"]), _fmt(b["precision"]), _fmt(b["recall"]),
+                      _fmt(b["corner_error_px"]["median"]), _fmt(b["pck"]["2px"]),
+                      _fmt(b["pck"]["5px"]))  # fmt: skip
+    console.print(table)
+    console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core)", highlight=False)
+    if r["error_model_path"]:
+        console.print(f"error model written to {escape(r['error_model_path'])}", highlight=False)
+    if json_path is not None:
+        console.print(f"report written to {escape(str(json_path))}", highlight=False)

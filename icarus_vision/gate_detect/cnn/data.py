@@ -1,0 +1,186 @@
+"""Loading a gen-dataset split (COCO keypoints + PNG) into memory, and the training ``Dataset``.
+
+Images are resized once to the network input (INTER_AREA) when loaded; a 5,000-image split at
+160x120 takes about 300 MB. Keypoints stay in camera pixels (u, v) until a sample is drawn.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from torch.utils.data import Dataset
+
+from icarus_vision.gate_detect.cnn.augment import FLIP_ORDER, make_augment
+
+
+@dataclass(frozen=True)
+class GateTruth:
+    """One labelled gate.
+
+    Attributes:
+        corners: (4, 2) float64 camera pixels (u, v), TL, TR, BR, BL; NaN behind the camera.
+        visibility: (4,) int COCO flags (2 visible, 1 hidden, 0 outside the image).
+        distance: camera to gate centre, m.
+        annotation: the COCO annotation it came from.
+    """
+
+    corners: np.ndarray
+    visibility: np.ndarray
+    distance: float
+    annotation: dict
+
+
+@dataclass
+class Split:
+    """One split of a dataset, loaded.
+
+    Attributes:
+        files: (N,) image paths.
+        images: (N, h, w, 3) uint8 RGB at ``input_size`` (None when loaded without pixels).
+        gates: per image, its labelled gates.
+        image_info: per image, its COCO image entry (camera K, pose ...).
+        image_size: (W, H) of the camera frames, pixels.
+    """
+
+    files: list[Path]
+    images: np.ndarray | None
+    gates: list[list[GateTruth]]
+    image_info: list[dict]
+    image_size: tuple[int, int]
+
+
+def read_rgb(path: Path) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of an image file.
+
+    Raises:
+        FileNotFoundError / ValueError: missing or unreadable, naming the file.
+    """
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: image file not found")
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ValueError(f"{path}: cannot read the image (missing or corrupt)")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def _gate(a: dict) -> GateTruth:
+    kp = np.asarray(a["keypoints"], float).reshape(4, 3)
+    corners = np.array([c if c is not None else [np.nan, np.nan] for c in a["corners_px"]], float)
+    return GateTruth(corners, kp[:, 2].astype(int), float(a.get("distance", np.nan)), a)
+
+
+def load_split(
+    data_dir: str | Path,
+    split: str,
+    input_size: tuple[int, int] | None = None,
+    limit: int | None = None,
+) -> Split:
+    """Read ``annotations/<split>.json`` and its images.
+
+    Args:
+        data_dir: a gen-dataset output folder.
+        split: ``train``, ``val`` or ``test``.
+        input_size: (w, h) to resize the images to; None keeps them out of memory (labels only,
+            though every image is still checked readable).
+        limit: read only the first ``limit`` images.
+
+    Raises:
+        FileNotFoundError: no such folder or annotation file, or a missing image (named).
+        ValueError: an unreadable annotation file or image (named).
+    """
+    root = Path(data_dir)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: dataset folder not found")
+    ann_path = root / "annotations" / f"{split}.json"
+    if not ann_path.is_file():
+        raise FileNotFoundError(f"{ann_path}: annotation file not found (is {root} a dataset?)")
+    try:
+        coco = json.loads(ann_path.read_text())
+        infos = sorted(coco["images"], key=lambda im: im["id"])[:limit]
+        by_image: dict[int, list[GateTruth]] = {im["id"]: [] for im in infos}
+        for a in coco["annotations"]:
+            if a["image_id"] in by_image:
+                by_image[a["image_id"]].append(_gate(a))
+    except (ValueError, KeyError, TypeError, IndexError) as e:
+        raise ValueError(f"{ann_path}: not a valid COCO keypoint file ({e})") from None
+    if not infos:
+        raise ValueError(f"{ann_path}: the {split} split holds no images")
+    files = [root / "images" / im["file_name"] for im in infos]
+    images = None
+    if input_size is not None:
+        images = np.empty((len(files), input_size[1], input_size[0], 3), np.uint8)
+    for i, f in enumerate(files):
+        if images is None:
+            if not f.is_file():
+                raise FileNotFoundError(f"{f}: image file not found")
+            continue
+        rgb = read_rgb(f)
+        images[i] = cv2.resize(rgb, input_size, interpolation=cv2.INTER_AREA)
+    size = (int(infos[0]["width"]), int(infos[0]["height"]))
+    return Split(files, images, [by_image[im["id"]] for im in infos], infos, size)
+
+
+class GateDataset(Dataset):
+    """Augmented training samples: (image (3, h, w) float32 in [0, 1], target, weight).
+
+    Args:
+        split: a split loaded with images.
+        grid: (w, h) of the network output, cells.
+        augment: apply the training augmentation (else the image as is).
+        seed: seed of the augmentation.
+    """
+
+    def __init__(self, split: Split, grid: tuple[int, int], augment: bool, seed: int = 0) -> None:
+        from icarus_vision.gate_detect.cnn.targets import encode_targets
+
+        self.split, self.grid, self.encode = split, grid, encode_targets
+        self.augment = make_augment(seed) if augment else None
+        self.rng = np.random.default_rng(seed)
+
+    def __len__(self) -> int:
+        return len(self.split.files)
+
+    def __getitem__(self, i: int):
+        img = self.split.images[i]
+        h, w = img.shape[:2]
+        sx, sy = w / self.split.image_size[0], h / self.split.image_size[1]
+        gates = self.split.gates[i]
+        # (G, 4, 2) continuous input coordinates (left image edge at 0), NaN where unknown.
+        kps = np.array([(g.corners + 0.5) * (sx, sy) for g in gates]).reshape(-1, 4, 2)
+        vis = np.array([g.visibility for g in gates], int).reshape(-1, 4)
+        if self.augment is not None:
+            if self.rng.random() < 0.5:
+                img, kps, vis = mirror(img, kps, vis)
+            known = np.isfinite(kps).all(axis=2)
+            flat = np.where(known[..., None], kps, -1e4).reshape(-1, 2)  # parked far away
+            out = self.augment(image=np.ascontiguousarray(img), keypoints=flat)
+            img = out["image"]
+            kps = np.asarray(out["keypoints"], float).reshape(-1, 4, 2)
+            kps = np.where(known[..., None], kps, np.nan)
+            with np.errstate(invalid="ignore"):
+                inside = (kps >= 0).all(axis=2) & (kps[..., 0] < w) & (kps[..., 1] < h)
+            vis = np.where(inside, vis, 0)
+        gx, gy = self.grid[0] / w, self.grid[1] / h
+        items = [(k * (gx, gy), v) for k, v in zip(kps, vis, strict=True)]
+        target, weight = self.encode(items, *self.grid)
+        x = np.ascontiguousarray(img.transpose(2, 0, 1), dtype=np.float32) / 255.0
+        return x, target, weight
+
+
+def mirror(
+    image: np.ndarray, kps: np.ndarray, vis: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mirror an image left-right with its gates: TL <-> TR and BR <-> BL swap names.
+
+    Args:
+        image: (h, w, 3).
+        kps: (G, 4, 2) continuous coordinates (left edge at x = 0), NaN allowed.
+        vis: (G, 4) visibility flags.
+    """
+    w = image.shape[1]
+    out = np.stack([w - kps[..., 0], kps[..., 1]], axis=-1)
+    return image[:, ::-1], out[:, FLIP_ORDER], vis[:, FLIP_ORDER]

@@ -1,0 +1,108 @@
+"""The corner network: a small encoder-decoder that predicts gate centres and corners at stride 4.
+
+Input: an RGB frame resized to ``ModelConfig.input_size`` (160x120 by default, half the camera's
+320x240), scaled to [0, 1]. Output, on a grid of ``stride`` camera pixels per cell (80x60 cells for
+a 320x240 frame):
+
+* channel 0: gate-centre heatmap (logits; the centre is the mean of the four opening corners),
+* channels 1-4: corner heatmaps (logits), one per corner type TL, TR, BR, BL,
+* channels 5-6: sub-cell offset (x, y) of a corner relative to the cell's top-left, in cells,
+* channels 7-14: the four corners relative to the centre cell, (dx, dy) per corner, in cells / 8.
+
+Grouping corners into gates (``decode.py``): each centre peak predicts its four corners by
+regression; each is then snapped to the nearest peak of the same corner type's heatmap, which is
+more precise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+
+NUM_OUT = 15
+"""Output channels: centre heatmap, 4 corner heatmaps, 2 offsets, 8 centre-to-corner vectors."""
+VECTOR_SCALE = 8.0
+"""Centre-to-corner vectors are predicted in units of ``VECTOR_SCALE`` cells."""
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Architecture of the corner network (stored as JSON beside the weights)."""
+
+    input_size: tuple[int, int] = (160, 120)
+    """Network input (width, height), pixels; frames are resized to it (INTER_AREA)."""
+    image_size: tuple[int, int] = (320, 240)
+    """Camera frame (width, height) the network was trained for, pixels."""
+    widths: tuple[int, int, int, int] = (16, 24, 48, 64)
+    """Channels at input strides 2, 4, 8 and 16."""
+    head_width: int = 24
+    """Channels of the decoder at the output resolution."""
+
+    @property
+    def stride(self) -> float:
+        """Camera pixels per output cell (the network outputs at input stride 2)."""
+        return 2.0 * self.image_size[0] / self.input_size[0]
+
+    def to_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ModelConfig:
+        known = {"input_size", "image_size", "widths", "head_width"}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown model config keys {sorted(unknown)}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+def _conv(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Conv2d(cin, cout, 3, stride, padding=dilation, dilation=dilation, bias=False),
+        nn.BatchNorm2d(cout),
+        nn.ReLU(inplace=True),
+    )
+
+
+class CornerNet(nn.Module):
+    """Encoder (strides 2-16) with a dilated context block, FPN-style decoder back to stride 2.
+
+    Args:
+        cfg: the architecture.
+
+    Shapes: (B, 3, H, W) float in [0, 1] -> (B, 15, H/2, W/2) (see the module docstring).
+    """
+
+    def __init__(self, cfg: ModelConfig = ModelConfig()) -> None:
+        super().__init__()
+        c1, c2, c3, c4 = cfg.widths
+        h = cfg.head_width
+        self.cfg = cfg
+        self.enc1 = nn.Sequential(_conv(3, c1, 2), _conv(c1, c1))
+        self.enc2 = nn.Sequential(_conv(c1, c2, 2), _conv(c2, c2))
+        self.enc3 = nn.Sequential(_conv(c2, c3, 2), _conv(c3, c3))
+        self.enc4 = nn.Sequential(
+            _conv(c3, c4, 2), _conv(c4, c4, dilation=2), _conv(c4, c4, dilation=4)
+        )
+        self.lat3 = nn.Conv2d(c3, c4, 1)
+        self.up3 = _conv(c4, c3)
+        self.lat2 = nn.Conv2d(c2, c3, 1)
+        self.up2 = _conv(c3, h)
+        self.lat1 = nn.Conv2d(c1, h, 1)
+        self.up1 = _conv(h, h)
+        self.out = nn.Conv2d(h, NUM_OUT, 1)
+        with torch.no_grad():  # heatmaps start near 0.01 (focal-loss practice)
+            self.out.bias.zero_()
+            self.out.bias[:5].fill_(-4.6)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        f1 = self.enc1(x)
+        f2 = self.enc2(f1)
+        f3 = self.enc3(f2)
+        f4 = self.enc4(f3)
+        up = nn.functional.interpolate
+        y = self.up3(self.lat3(f3) + up(f4, size=f3.shape[-2:], mode="nearest"))
+        y = self.up2(self.lat2(f2) + up(y, size=f2.shape[-2:], mode="nearest"))
+        y = self.up1(self.lat1(f1) + up(y, size=f1.shape[-2:], mode="nearest"))
+        return self.out(y)

@@ -1,0 +1,77 @@
+"""Validation of the corner network, and the choice of its decoding thresholds on the val split.
+
+The network runs once over the split; decoding (cheap) is then repeated for each candidate
+:class:`DecodeConfig`, and the one with the best validation score is kept.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from icarus_vision.gate_detect.cnn.data import Split
+from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.targets import DecodeConfig, decode
+from icarus_vision.gate_detect.metrics import evaluate_image, summarize
+
+CENTRE_THRESHOLDS = (0.15, 0.2, 0.3, 0.4, 0.5, 0.6)
+CORNER_THRESHOLDS = (0.05, 0.1, 0.2, 0.3)
+SNAP_RADII = (0.2, 0.3, 0.4)
+
+
+def score(metrics: dict) -> float:
+    """Validation score: mean of precision, recall, PCK@5px and PCK@2px (missing counts 0)."""
+    vals = [metrics["precision"], metrics["recall"], metrics["pck"]["5px"], metrics["pck"]["2px"]]
+    return float(np.mean([v or 0.0 for v in vals]))
+
+
+def network_outputs(model: CornerNet, split: Split, batch: int = 32) -> torch.Tensor:
+    """(N, 15, h, w) raw outputs of the network (eval mode) on a split loaded with images."""
+    was_training = model.training
+    model.eval()
+    outs = []
+    with torch.inference_mode():
+        for i in range(0, len(split.files), batch):
+            x = split.images[i : i + batch].transpose(0, 3, 1, 2).astype(np.float32) / 255.0
+            outs.append(model(torch.from_numpy(x)))
+    model.train(was_training)
+    return torch.cat(outs)
+
+
+def metrics_of(outputs: torch.Tensor, split: Split, cfg: DecodeConfig, min_gate_px: float) -> dict:
+    """:func:`~icarus_vision.gate_detect.metrics.summarize` of decoded outputs against the split."""
+    w, h = split.image_size
+    gts, preds = [], []
+    for o, gates in zip(outputs, split.gates, strict=True):
+        found = decode(o, cfg, (w / o.shape[-1], h / o.shape[-2]))
+        truth = [(g.corners, g.visibility, g.distance) for g in gates]
+        g_rec, p_rec = evaluate_image([(c, s) for c, _, s in found], truth, min_gate_px)
+        gts += g_rec
+        preds += p_rec
+    return summarize(gts, preds, min_gate_px)
+
+
+def validate(model: CornerNet, split: Split, cfg: DecodeConfig, min_gate_px: float) -> dict:
+    """Validation metrics of the network with decoding ``cfg``."""
+    return metrics_of(network_outputs(model, split), split, cfg, min_gate_px)
+
+
+def tune_decode(
+    model: CornerNet, split: Split, base: DecodeConfig, min_gate_px: float
+) -> tuple[DecodeConfig, dict]:
+    """The decoding thresholds (grid above) with the best :func:`score` on ``split``.
+
+    Returns:
+        (best config, its metrics).
+    """
+    outputs = network_outputs(model, split)
+    best = (-1.0, base, {})
+    for c, k, r in itertools.product(CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII):
+        cfg = replace(base, centre_threshold=c, corner_threshold=k, snap_radius=r)
+        m = metrics_of(outputs, split, cfg, min_gate_px)
+        if score(m) > best[0]:
+            best = (score(m), cfg, m)
+    return best[1], best[2]

@@ -1,0 +1,148 @@
+"""``eval_detector``: a detector's accuracy and speed on a dataset's test split, and its error model.
+
+The matching rule and which gates count are in :mod:`icarus_vision.gate_detect.metrics`. Inference
+time is measured per frame around ``Detector.detect`` (resizing and decoding included, file reading
+excluded), with PyTorch and OpenCV limited to one thread.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from icarus_vision.fileio import atomic_write_json
+from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.error_model import build_error_model, gate_error, viewing_angle_deg
+from icarus_vision.gate_detect.metrics import (
+    DISTANCE_BINS_M,
+    SIZE_BINS_PX,
+    binned,
+    evaluable,
+    evaluate_image,
+    summarize,
+)
+from icarus_vision.gate_detect.registry import make_detector
+
+GATE_SIZE_M = 1.0
+"""Opening side assumed to estimate the distance of a false positive from its apparent size."""
+
+
+@contextmanager
+def one_thread():
+    """Limit PyTorch and OpenCV to one thread for the duration (restored afterwards)."""
+    import torch
+
+    torch_n, cv_n = torch.get_num_threads(), cv2.getNumThreads()
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(torch_n)
+        cv2.setNumThreads(cv_n)
+
+
+def eval_detector(
+    data_dir: str | Path,
+    detector_spec: str,
+    json_path: str | Path | None = None,
+    error_model_path: str | Path | None = None,
+    min_gate_px: float = 20.0,
+    split: str = "test",
+    limit: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
+    """Evaluate a detector on a gen-dataset split.
+
+    Args:
+        data_dir: gen-dataset output folder.
+        detector_spec: ``cnn``, ``cnn:PATH`` or ``opencv``.
+        json_path: also write the report here.
+        error_model_path: write the error model here (default: beside ``json_path`` as
+            ``<stem>.error_model.json``; not written when both are None).
+        min_gate_px: smallest counted gate (mean side of the opening), pixels.
+        split: which split.
+        limit: evaluate only the first ``limit`` images.
+        progress: called with (images done, total).
+
+    Returns:
+        the report: detector, images, gates, min_gate_px, precision, recall, corner_error_px
+        {mean, median}, pck {2px, 5px}, ms_per_frame, by_distance, by_size, matching_rule,
+        error_model (the model itself) and error_model_path.
+
+    Raises:
+        FileNotFoundError / ValueError: bad dataset (naming the first bad file) or detector spec.
+    """
+    if min_gate_px < 0:
+        raise ValueError(f"min_gate_px must be >= 0, got {min_gate_px}")
+    detector = make_detector(detector_spec)
+    data = load_split(data_dir, split, None, limit)
+    gts, preds, samples, times = [], [], [], []
+    n = len(data.files)
+    with one_thread():
+        for i, path in enumerate(data.files):
+            image = read_rgb(path)
+            t0 = time.perf_counter()
+            found = detector.detect(image)
+            times.append(time.perf_counter() - t0)
+            k = np.asarray(data.image_info[i]["camera"]["K"], float)
+            truth = [(g.corners, g.visibility, g.distance) for g in data.gates[i]]
+            g_rec, p_rec = evaluate_image([(d.corners, d.score) for d in found], truth, min_gate_px)
+            for p in p_rec:
+                if p["distance"] is None and p["side"] > 0:
+                    p["distance"] = k[0, 0] * GATE_SIZE_M / p["side"]
+            for g, gate in zip(g_rec, data.gates[i], strict=True):
+                if evaluable(gate.corners, gate.visibility):
+                    samples.append(_sample(g, gate, k))
+            gts += g_rec
+            preds += p_rec
+            if progress is not None:
+                progress(i + 1, n)
+    report = {
+        "detector": detector_spec,
+        "split": split,
+        "images": n,
+        "min_gate_px": min_gate_px,
+        **summarize(gts, preds, min_gate_px),
+        "ms_per_frame": round(1000.0 * float(np.mean(times[1:] or times)), 3),
+        "ms_per_frame_median": round(1000.0 * float(np.median(times)), 3),
+        "by_distance": binned(gts, preds, "distance", DISTANCE_BINS_M, min_gate_px),
+        "by_size": binned(gts, preds, "side", SIZE_BINS_PX, 0.0),
+        "matching_rule": (
+            "greedy by score; a detection matches the unmatched true gate with the smallest mean "
+            "corner distance if <= max(4 px, 0.25 x its mean side); counted gates: 4 corners in "
+            "the image, >= 3 visible, mean side >= min_gate_px"
+        ),
+    }
+    model = build_error_model(samples, detector_spec) if samples else None
+    if error_model_path is None and json_path is not None:
+        error_model_path = Path(json_path).with_suffix(".error_model.json")
+    if model is not None and error_model_path is not None:
+        atomic_write_json(error_model_path, model)
+    report["error_model_path"] = str(error_model_path) if model and error_model_path else None
+    report["error_model"] = model
+    if json_path is not None:
+        atomic_write_json(json_path, report)
+    return report
+
+
+def _sample(rec: dict, gate, k: np.ndarray) -> dict:
+    pose = gate.annotation.get("gate_pose") or {}
+    angle = np.nan
+    if pose.get("R_cam_gate") is not None and pose.get("t_cam_gate") is not None:
+        angle = viewing_angle_deg(pose["R_cam_gate"], pose["t_cam_gate"])
+    error = None
+    if rec["matched"]:
+        error = gate_error(rec["pred_corners"], gate.corners, k, gate.distance)
+    return {
+        "distance": gate.distance,
+        "angle_deg": angle,
+        "matched": rec["matched"],
+        "error": error,
+        "corner_px": rec["errors"],
+    }

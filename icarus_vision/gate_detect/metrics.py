@@ -1,0 +1,163 @@
+"""Detection metrics: gate matching, precision/recall, corner error and PCK, binned breakdowns.
+
+Matching rule: detections are taken in decreasing score; each is matched to the unmatched
+ground-truth gate with the smallest mean distance between corresponding corners (TL-TL, TR-TR, ...),
+if that distance is at most ``max(4 px, 0.25 x the ground truth's mean side)``. One-to-one.
+
+Which gates count: a ground-truth gate counts in the figures when all four corners lie in the image,
+at least three are visible (not occluded), and its opening's mean side is at least ``min_gate_px``.
+Other labelled gates are *ignored*: missing them is no error, and a detection matched to one is
+neither a true nor a false positive; an unmatched detection smaller than ``min_gate_px`` is ignored
+too. Precision = TP / (TP + FP), recall = matched counted gates / counted gates. Corner errors
+are over the four corners of the matched counted gates; PCK@r is the fraction of the counted gates'
+corners detected within r pixels (corners of missed gates count as failures).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+DISTANCE_BINS_M = (0.0, 2.0, 4.0, 8.0, 12.0, 16.0, np.inf)
+"""Edges of the distance breakdown, m."""
+SIZE_BINS_PX = (0.0, 20.0, 40.0, 80.0, 160.0, np.inf)
+"""Edges of the apparent-size breakdown (mean side of the opening), pixels."""
+
+
+def mean_side(corners: np.ndarray) -> float:
+    """Mean side length of a (4, 2) quadrilateral, pixels (NaN if a corner is NaN)."""
+    c = np.asarray(corners, float)
+    return float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).mean())
+
+
+def match(
+    pred: list[np.ndarray], scores: list[float], truth: list[np.ndarray]
+) -> dict[int, tuple[int, float]]:
+    """Greedy one-to-one matching (see the module docstring).
+
+    Args:
+        pred: detected corners, (4, 2) pixels each.
+        scores: their gate scores.
+        truth: true corners, (4, 2) pixels each (NaN corners never match).
+
+    Returns:
+        {detection index: (truth index, mean corner distance px)}.
+    """
+    out: dict[int, tuple[int, float]] = {}
+    taken: set[int] = set()
+    tol = [max(4.0, 0.25 * mean_side(t)) for t in truth]
+    for i in np.argsort(-np.asarray(scores, float), kind="stable"):
+        best, best_d = -1, np.inf
+        for j, t in enumerate(truth):
+            if j in taken:
+                continue
+            d = float(np.linalg.norm(pred[i] - t, axis=1).mean())
+            if d <= tol[j] and d < best_d:
+                best, best_d = j, d
+        if best >= 0:
+            out[int(i)] = (best, best_d)
+            taken.add(best)
+    return out
+
+
+def evaluable(corners: np.ndarray, visibility: np.ndarray) -> bool:
+    """All four corners in the image and at least three visible (before the size cut)."""
+    return bool(
+        np.isfinite(corners).all() and (visibility > 0).all() and (visibility == 2).sum() >= 3
+    )
+
+
+def summarize(gts: list[dict], preds: list[dict], min_gate_px: float) -> dict:
+    """Headline figures of one set of gates.
+
+    Args:
+        gts: per ground-truth gate: ``evaluable`` bool, ``side`` px, ``matched`` bool and
+            ``errors`` (4,) px corner errors (when matched).
+        preds: per detection: ``status`` "tp", "fp" or "ignored", and ``side`` px.
+        min_gate_px: smallest counted gate side.
+
+    Returns:
+        gates, precision, recall, corner_error_px {mean, median}, pck {2px, 5px}.
+    """
+    counted = [g for g in gts if g["evaluable"] and g["side"] >= min_gate_px]
+    tp = sum(p["status"] == "tp" for p in preds)
+    fp = sum(p["status"] == "fp" for p in preds)
+    errs = np.concatenate([g["errors"] for g in counted if g["matched"]] or [np.zeros(0)])
+    n_corners = 4 * len(counted)
+
+    def r(x: float) -> float | None:
+        return None if x is None or not np.isfinite(x) else round(float(x), 4)
+
+    return {
+        "gates": len(counted),
+        "precision": r(tp / (tp + fp)) if tp + fp else None,
+        "recall": r(sum(g["matched"] for g in counted) / len(counted)) if counted else None,
+        "corner_error_px": {
+            "mean": r(errs.mean()) if len(errs) else None,
+            "median": r(np.median(errs)) if len(errs) else None,
+        },
+        "pck": {
+            "2px": r((errs <= 2.0).sum() / n_corners) if n_corners else None,
+            "5px": r((errs <= 5.0).sum() / n_corners) if n_corners else None,
+        },
+    }
+
+
+def evaluate_image(
+    pred: list[tuple[np.ndarray, float]],
+    truth: list[tuple[np.ndarray, np.ndarray, float]],
+    min_gate_px: float,
+) -> tuple[list[dict], list[dict]]:
+    """Records of one image for :func:`summarize`.
+
+    Args:
+        pred: (corners (4, 2), score) per detection.
+        truth: (corners (4, 2), visibility (4,), distance m) per labelled gate.
+        min_gate_px: smallest counted gate side.
+
+    Returns:
+        (gt records, detection records); gt records also carry ``distance``, ``corners``,
+        ``pred_corners`` (matched) ; detection records carry ``side`` and ``distance`` (of the
+        matched gate, else None).
+    """
+    m = match([p[0] for p in pred], [p[1] for p in pred], [t[0] for t in truth])
+    by_gt = {j: (i, d) for i, (j, d) in m.items()}
+    gts = []
+    for j, (corners, vis, dist) in enumerate(truth):
+        i = by_gt.get(j, (None,))[0]
+        errors = None if i is None else np.linalg.norm(pred[i][0] - corners, axis=1)
+        gts.append({
+            "evaluable": evaluable(corners, vis), "side": mean_side(corners), "distance": dist,
+            "matched": i is not None, "errors": errors, "corners": corners,
+            "pred_corners": None if i is None else pred[i][0],
+        })  # fmt: skip
+    preds = []
+    for i, (corners, _) in enumerate(pred):
+        side = mean_side(corners)
+        if i in m:
+            g = gts[m[i][0]]
+            counted = g["evaluable"] and g["side"] >= min_gate_px
+            status, dist = ("tp" if counted else "ignored"), g["distance"]
+        else:
+            status, dist = ("fp" if side >= min_gate_px else "ignored"), None
+        preds.append({"status": status, "side": side, "distance": dist})
+    return gts, preds
+
+
+def binned(
+    gts: list[dict], preds: list[dict], key: str, edges: tuple[float, ...], min_gate_px: float
+) -> list[dict]:
+    """:func:`summarize` per bin of ``key`` (``distance`` m or ``side`` px); a false positive
+    is put in the bin of its own ``key`` (its side, or for distance the estimate in ``distance``)."""
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        s = summarize(
+            [g for g in gts if _inside(g[key], lo, hi)],
+            [p for p in preds if _inside(p[key], lo, hi)],
+            min_gate_px,
+        )
+        out.append({"min": lo, "max": None if not np.isfinite(hi) else hi, **s})
+    return out
+
+
+def _inside(x: float | None, lo: float, hi: float) -> bool:
+    return x is not None and bool(np.isfinite(x)) and lo <= x < hi

@@ -1,0 +1,203 @@
+"""The CNN: target encoding/decoding, augmentation, a few training steps, save/load, ONNX."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.cnn import CnnDetector
+from icarus_vision.gate_detect.cnn.augment import make_augment
+from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
+from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, mirror
+from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.targets import (
+    DecodeConfig,
+    decode,
+    detection_loss,
+    encode_targets,
+)
+from tests.gate_detect.conftest import TINY_MODEL
+
+GATE_A = np.array([[30.3, 20.6], [52.2, 21.4], [51.7, 44.9], [29.1, 43.2]])  # grid units
+GATE_B = np.array([[60.4, 30.2], [66.8, 30.5], [66.6, 36.9], [60.1, 36.6]])
+VIS = np.array([2, 2, 2, 2])
+
+
+def _as_logits(target: np.ndarray) -> torch.Tensor:
+    t = torch.from_numpy(target.copy())
+    t[:5] = torch.logit(t[:5].clamp(1e-4, 1 - 1e-4))
+    return t
+
+
+def test_encode_then_decode_recovers_two_gates():
+    target, weight = encode_targets([(GATE_A, VIS), (GATE_B, VIS)], 80, 60)
+    assert target[0].max() == 1.0 and (target[1:5] == 1.0).sum() == 8
+    found = decode(_as_logits(target), DecodeConfig(), (4.0, 4.0))
+    assert len(found) == 2
+    for truth in (GATE_A, GATE_B):
+        px = truth * 4.0 - 0.5
+        err = min(np.abs(c - px).max() for c, _, _ in found)
+        assert err < 1e-3
+
+
+def test_hidden_corner_falls_back_on_the_regressed_vector():
+    vis = np.array([2, 2, 1, 2])
+    target, _ = encode_targets([(GATE_A, vis)], 80, 60)
+    ((corners, scores, _),) = decode(_as_logits(target), DecodeConfig(), (4.0, 4.0))
+    assert scores[2] == 0.0 and scores[[0, 1, 3]].min() > 0.9
+    np.testing.assert_allclose(corners, GATE_A * 4.0 - 0.5, atol=1e-3)
+
+
+def test_augmentation_keeps_keypoints_on_the_gate_corners():
+    """A white square on black: after every augmentation the keypoints still sit on its corners."""
+    img = np.zeros((120, 160, 3), np.uint8)
+    img[40:80, 60:100] = 255
+    kps = np.array([[60.0, 40.0], [100.0, 40.0], [100.0, 80.0], [60.0, 80.0]])  # continuous coords
+    aug = make_augment(seed=3)
+    for _ in range(30):
+        out = aug(image=img, keypoints=kps)
+        grey = out["image"].mean(axis=2)
+        thr = 0.5 * (np.percentile(grey, 1) + np.percentile(grey, 99))
+        for x, y in np.asarray(out["keypoints"]):
+            u, v = int(round(x - 0.5)), int(round(y - 0.5))
+            if 2 <= u < 158 and 2 <= v < 118:
+                win = grey[v - 2 : v + 3, u - 2 : u + 3] > thr
+                assert win.any() and not win.all(), (x, y)
+
+
+def test_mirror_swaps_left_and_right_corners():
+    img = np.zeros((120, 160, 3), np.uint8)
+    img[10, 0] = 255
+    kps = np.array([[[40.0, 30.0], [80.0, 32.0], [78.0, 70.0], [np.nan, 68.0]]])
+    vis = np.array([[2, 1, 2, 0]])
+    m_img, m_kps, m_vis = mirror(img, kps, vis)
+    assert m_img[10, 159].all()
+    np.testing.assert_allclose(
+        m_kps[0], [[80.0, 32.0], [120.0, 30.0], [np.nan, 68.0], [82.0, 70.0]]
+    )
+    assert m_vis.tolist() == [[1, 2, 0, 2]]
+
+
+def test_dataset_sample_has_peaks_at_the_gate_corners(tiny_dataset):
+    split = load_split(tiny_dataset, "train", TINY_MODEL.input_size)
+    i = next(i for i, g in enumerate(split.gates) if any((x.visibility == 2).all() for x in g))
+    gate = next(g for g in split.gates[i] if (g.visibility == 2).all())
+    _, target, _ = GateDataset(split, (40, 30), augment=False)[i]
+    for k in range(4):
+        cell = np.floor((gate.corners[k] + 0.5) / 4.0).astype(int)  # 160 px -> 40 cells
+        if 0 <= cell[0] < 40 and 0 <= cell[1] < 30:
+            assert target[1 + k, cell[1], cell[0]] == 1.0
+
+
+def test_a_few_training_steps_lower_the_loss(tiny_dataset):
+    torch.manual_seed(0)
+    split = load_split(tiny_dataset, "train", TINY_MODEL.input_size)
+    ds = GateDataset(split, (40, 30), augment=False)
+    x, t, w = (
+        torch.from_numpy(np.stack(a)) for a in zip(*[ds[i] for i in range(len(ds))], strict=True)
+    )
+    model = CornerNet(TINY_MODEL)
+    opt = torch.optim.Adam(model.parameters(), 3e-3)
+    losses = []
+    for _ in range(25):
+        loss = detection_loss(model(x), t, w)["loss"]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(float(loss))
+    assert losses[-1] < 0.7 * losses[0]
+
+
+def test_save_load_and_onnx_give_the_same_output(tmp_path):
+    onnx = pytest.importorskip("onnx")
+    from onnx.reference import ReferenceEvaluator
+
+    torch.manual_seed(1)
+    model = CornerNet(TINY_MODEL).eval()
+    save_checkpoint(tmp_path / "ck", model, DecodeConfig(centre_threshold=0.2), {"note": "x"})
+    loaded, dec, meta = load_checkpoint(tmp_path / "ck" / "model.safetensors")
+    assert dec.centre_threshold == 0.2 and meta["training"]["note"] == "x"
+    x = torch.rand(2, 3, 60, 80)
+    with torch.no_grad():
+        a, b = model(x), loaded(x)
+    assert torch.equal(a, b)
+    export_onnx(loaded, tmp_path / "m.onnx")
+    sess = ReferenceEvaluator(onnx.load(str(tmp_path / "m.onnx")))
+    y = sess.run(None, {"image": x[:1].numpy()})[0]
+    np.testing.assert_allclose(y, a[:1].numpy(), atol=1e-4)
+    # the detector folds batch norm: same detections as the unfused network's maps
+    det = CnnDetector(loaded, DecodeConfig(centre_threshold=0.0))
+    img = (x[0].numpy().transpose(1, 2, 0) * 255).astype(np.uint8)
+    assert len(det.detect(img)) > 0
+
+
+def test_missing_or_corrupt_checkpoint_names_the_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        make_detector(f"cnn:{tmp_path / 'nowhere'}")
+    save_checkpoint(tmp_path / "ck", CornerNet(TINY_MODEL), DecodeConfig())
+    (tmp_path / "ck" / "model.safetensors").write_bytes(b"not safetensors at all")
+    with pytest.raises(ValueError, match="model.safetensors"):
+        make_detector(f"cnn:{tmp_path / 'ck'}")
+    (tmp_path / "ck" / "detector.json").write_text("{broken")
+    with pytest.raises(ValueError, match="detector.json"):
+        make_detector(f"cnn:{tmp_path / 'ck'}")
+    (tmp_path / "ck" / "detector.json").unlink()
+    with pytest.raises(FileNotFoundError, match="detector.json"):
+        make_detector(f"cnn:{tmp_path / 'ck'}")
+
+
+def test_shipped_default_loads_and_is_small():
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
+
+    det = make_detector("cnn")
+    assert isinstance(det, CnnDetector)
+    size = sum(f.stat().st_size for f in SHIPPED.iterdir())
+    assert size < 5 * 2**20
+
+
+def test_train_detector_writes_checkpoints_saves_on_ctrl_c_and_resumes(tiny_dataset, tmp_path):
+    from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
+
+    out = tmp_path / "run"
+    cfg = TrainConfig(batch_size=4, bf16=False)
+
+    def interrupt(line: str) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train_detector(tiny_dataset, out, epochs=2, config=cfg, model_config=TINY_MODEL,
+                       progress=False, log=interrupt)  # fmt: skip
+    assert (out / "last" / "train_state.pt").is_file() and (
+        out / "best" / "detector.json"
+    ).is_file()
+    with pytest.raises(ValueError, match="--resume"):
+        train_detector(tiny_dataset, out, epochs=2, config=cfg, progress=False)
+    lines = []
+    r = train_detector(tiny_dataset, out, epochs=2, resume=True, config=cfg, progress=False,
+                       log=lines.append)  # fmt: skip
+    assert r.epochs_done == 2 and lines[0].startswith("epoch 2") and "tuned" in lines[1]
+    assert [h["epoch"] for h in json.loads((out / "history.json").read_text())] == [1, 2]
+    assert (out / "model.onnx").is_file() and any((out / "tb").iterdir())
+    det = make_detector(f"cnn:{out / 'best'}")
+    assert isinstance(det.detect(np.zeros((120, 160, 3), np.uint8)), list)
+
+
+@pytest.mark.parametrize("pos", [(0.0, 0.0, 2.0), (-2.0, 0.0, 2.0), (0.5, 0.6, 2.3)])
+def test_shipped_cnn_finds_a_rendered_gate(pos):
+    from icarus_vision.render.camera import Camera
+    from icarus_vision.render.scene import Scene
+    from icarus_vision.sim.track import Gate, Track
+
+    track = Track("one", (Gate((4.0, 0.0, 2.0)),), start_pos=(0.0, 0.0, 0.2))
+    cam = Camera(uptilt_deg=0.0)
+    quat = np.array([0.0, 0.0, 0.0, 1.0])
+    with Scene(track, cam) as scene:
+        frame = scene.render(np.array(pos), quat)
+    truth, _ = cam.project(track.gates[0].corners(), np.array(pos), quat)
+    found = make_detector("cnn").detect(frame.rgb)
+    assert len(found) == 1
+    assert np.linalg.norm(found[0].corners - truth, axis=1).max() < 5.0

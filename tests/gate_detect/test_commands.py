@@ -1,0 +1,49 @@
+"""`train-detector` and `eval-detector` on the command line: help, a run, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from icarus_vision.cli import app
+
+runner = CliRunner()
+
+
+@pytest.mark.parametrize("cmd", ["train-detector", "eval-detector"])
+def test_help(cmd):
+    r = runner.invoke(app, [cmd, "--help"])
+    assert r.exit_code == 0 and "--data" in r.output
+
+
+def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
+    out = tmp_path / "r.json"
+    em = tmp_path / "em.json"
+    r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--detector", "opencv",
+                            "--json", str(out), "--error-model", str(em)])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert json.loads(out.read_text())["detector"] == "opencv"
+    assert "distance_m" in json.loads(em.read_text())
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["eval-detector", "--data", "{tmp}/missing", "--detector", "opencv"], "missing"),
+        (["eval-detector", "--data", "{data}", "--detector", "nosuch"], "nosuch"),
+        (["eval-detector", "--data", "{data}", "--detector", "cnn:{tmp}/none.safetensors"], "none"),
+        (["train-detector", "--data", "{tmp}/missing", "--out", "{tmp}/o"], "missing"),
+        (
+            ["train-detector", "--data", "{data}", "--out", "{tmp}/o", "--resume"],
+            "nothing to resume",
+        ),
+    ],
+)
+def test_errors_are_one_line(tiny_dataset, tmp_path, args, needle):
+    args = [a.format(tmp=tmp_path, data=tiny_dataset) for a in args]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 1
+    lines = [s for s in r.output.strip().splitlines() if s.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], r.output
