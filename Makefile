@@ -14,9 +14,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-# Until the shipped detector lands, the default race flies the shipped policy on the oracle
-# (true gate position); override with e.g. `make race ARGS="--detector cnn"`.
-ARGS ?= --detector oracle
+# `make race` flies the default race with the shipped CNN detector and policy; pass options with
+# e.g. `make race ARGS="--track ten-gates --randomize"`.
+ARGS ?=
 
 race: $(STAMP)
 	$(BIN)/icarus-vision race $(ARGS)
