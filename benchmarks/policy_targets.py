@@ -1,0 +1,66 @@
+"""Policy learning-speed figures: single gate within one minute, and a curve plot of a run.
+
+    .venv/bin/python benchmarks/policy_targets.py single-gate [--minutes 1] [--episodes 200]
+    .venv/bin/python benchmarks/policy_targets.py curves RUN_DIR [RUN_DIR ...] --png docs/policy_training_curves.png
+
+``single-gate`` trains the fast preset on the single-gate stage for a wall-clock budget, then flies
+the deterministic policy on that many random single-gate tracks (randomisation and perception noise
+as in training) and prints the success rate. ``curves`` plots success rate and return against
+wall-clock from runs' ``metrics.json`` (or ``checkpoints/last_state.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+from icarus_vision.policy.config import FAST, CurriculumConfig
+from icarus_vision.policy.evaluate import evaluate_policy
+from icarus_vision.policy.export import load_policy
+from icarus_vision.policy.plots import plot_training_curves
+from icarus_vision.policy.train import train_policy
+
+
+def single_gate(minutes: float, episodes: int) -> dict:
+    cfg = replace(
+        FAST, curriculum=CurriculumConfig(stages=(1,)), checkpoint_every=10**12, eval_every=10**12
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        res = train_policy(
+            cfg, f"{tmp}/run", seed=0, timesteps=10**9, max_wall_s=60.0 * minutes, verbose=0
+        )
+        pol = load_policy(res.policy_path)
+        ev = evaluate_policy(pol, None, episodes=episodes, num_gates=1, randomize=True, seed=123)
+    return {"minutes": minutes, "timesteps": res.timesteps, "success_rate": ev["success_rate"],
+            "crash_reasons": ev["crash_reasons"]}  # fmt: skip
+
+
+def _metrics(run: Path) -> list[dict]:
+    if (run / "metrics.json").is_file():
+        return json.loads((run / "metrics.json").read_text())
+    return json.loads((run / "checkpoints" / "last_state.json").read_text())["metrics"]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    a = sub.add_parser("single-gate")
+    a.add_argument("--minutes", type=float, default=1.0)
+    a.add_argument("--episodes", type=int, default=200)
+    c = sub.add_parser("curves")
+    c.add_argument("runs", nargs="+", type=Path)
+    c.add_argument("--png", type=Path, required=True)
+    c.add_argument("--title", default="PPO, fast preset, random tracks, curriculum 1-3-5-10 gates")
+    args = ap.parse_args()
+    if args.cmd == "single-gate":
+        print(json.dumps(single_gate(args.minutes, args.episodes), indent=2))
+    else:
+        plot_training_curves({r.name: _metrics(r) for r in args.runs}, args.png, args.title)
+        print(f"wrote {args.png}")
+
+
+if __name__ == "__main__":
+    main()
