@@ -25,6 +25,9 @@ def main() -> None:
     ap.add_argument("--detector", default="cnn")
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--tracks", type=int, default=20)
+    ap.add_argument(
+        "--seed0", type=int, default=100, help="first seed (the estimator was tuned on 0-19)"
+    )
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     det = args.detector

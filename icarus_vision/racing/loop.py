@@ -21,7 +21,6 @@ import numpy as np
 from icarus_vision.estimator.config import EstimatorConfig
 from icarus_vision.estimator.estimator import GateEstimator
 from icarus_vision.estimator.odometry import SimulatedOdometry
-from icarus_vision.estimator.prior import displaced_map
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.render.camera import Camera
 from icarus_vision.sim.dynamics import quat_to_rpy
@@ -45,12 +44,11 @@ class LoopRecord:
 class Perception:
     """Camera, detector and estimator for one drone, with detection latency."""
 
-    def __init__(self, detector: str, track: Track, camera: Camera, scene, seed: int, latency_frames: int,
-                 map_error_m: float = 0.0) -> None:  # fmt: skip
+    def __init__(self, detector: str, prior: Track, camera: Camera, scene, seed: int, latency_frames: int,
+                 config: EstimatorConfig | None = None) -> None:  # fmt: skip
         self.camera, self.scene = camera, scene
         self.detector = make_detector(detector)
-        prior = displaced_map(track, map_error_m, 0.0, seed) if map_error_m > 0 else track
-        self.estimator = GateEstimator(camera, EstimatorConfig(), prior)
+        self.estimator = GateEstimator(camera, config or EstimatorConfig(), prior)
         self.odometry = SimulatedOdometry(seed=seed + 1)
         self.pending: deque = deque()
         self.latency = latency_frames
@@ -81,7 +79,8 @@ def observation_from(od, rel_world: np.ndarray, extra: np.ndarray | None = None)
 
 
 def fly_loop(env, pilot, obs_dim: int, *, detector: str, camera: Camera, scene, seed: int,
-             latency_frames: int = 1, on_frame=None, map_error_m: float = 0.0) -> LoopRecord:  # fmt: skip
+             prior: Track, latency_frames: int = 1, on_frame=None,
+             estimator: EstimatorConfig | None = None) -> LoopRecord:  # fmt: skip
     """Fly one episode of a single-drone env (already reset) with perception in the loop.
 
     Args:
@@ -89,16 +88,18 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str, camera: Camera, scene, 
             (estimated, or true with the oracle).
         obs_dim: 15 (basic) or 21 (extended: the gate direction and the gate after come from the
             estimator's map, which vision keeps corrected).
+        prior: the estimator's map of the track (the nominal layout: with randomisation the real
+            gates are displaced from it and vision must correct them).
         on_frame: ``f(rgb, detections, estimate, state)`` called at each camera frame (video).
+        estimator: estimator configuration (noise model of the detector, filter gates).
     """
     core = env.unwrapped.core
     name, _ = parse_spec(detector)
     oracle = name == "oracle"
-    track = env.unwrapped.track
     per = (
         None
         if oracle
-        else Perception(detector, track, camera, scene, seed, latency_frames, map_error_m)
+        else Perception(detector, prior, camera, scene, seed, latency_frames, estimator)
     )
     frame_dt = 1.0 / camera_rate(env)
     next_frame = 0.0

@@ -70,3 +70,12 @@ def test_bad_arguments(kwargs, match):
 def test_trajectory_starts_at_start():
     res = run_race("single-gate", backend="batched", detector="oracle", policy="scripted")
     np.testing.assert_allclose(res.pos[0], res.track.start_pos)
+
+
+def test_race_with_the_shipped_cnn_and_policy_finishes():
+    r = run_race("single-gate", seed=0).report  # defaults: cnn detector, shipped policy, pybullet
+    assert r["detector"] == "cnn" and r["policy"] == "default"
+    assert r["finished"], r
+    p = r["perception"]
+    assert p["frames"] > 10 and p["detection_rate"] > 0.3
+    assert p["rel_gate_error_m"]["median"] < 0.5
