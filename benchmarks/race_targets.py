@@ -32,14 +32,16 @@ def main() -> None:
     args = ap.parse_args()
     det = args.detector
 
-    plain = [run_race(None, detector=det, seed=s).report for s in range(3)]
-    oracle = [run_race(None, detector="oracle", seed=s).report for s in range(3)]
+    s0 = args.seed0
+    plain = [run_race(None, detector=det, seed=s).report for s in range(s0, s0 + 3)]
+    oracle = [run_race(None, detector="oracle", seed=s).report for s in range(s0, s0 + 3)]
     rand_default = [
-        run_race(None, detector=det, seed=s, randomize=True).report for s in range(args.seeds)
+        run_race(None, detector=det, seed=s, randomize=True).report
+        for s in range(s0, s0 + args.seeds)
     ]
     rand_tracks = [
         run_race(random_track(10, 1000 + s), detector=det, seed=s, randomize=True).report
-        for s in range(args.tracks)
+        for s in range(s0, s0 + args.tracks)
     ]
 
     def finished(rs):
