@@ -36,11 +36,12 @@ def eval_estimator_cmd(
 ) -> None:
     """Fly a track in PyBullet with the scripted pilot, the camera, a detector and the estimator,
     and report the error of the estimated next-gate position against ground truth."""
-    from icarus_vision.estimator.config import EstimatorConfig
+    from icarus_vision.estimator.config import config_for_detector
     from icarus_vision.estimator.evaluate import evaluate_estimator
     from icarus_vision.fileio import atomic_write_json
+    from icarus_vision.gate_detect.registry import parse_spec
 
-    config = EstimatorConfig(mode=mode)
+    config = config_for_detector(parse_spec(detector)[0], mode)
     out = out or Path("runs") / f"eval-estimator-{datetime.now():%Y%m%d-%H%M%S}"
     report = evaluate_estimator(
         track,

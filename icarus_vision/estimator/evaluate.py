@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from icarus_vision.estimator.config import EstimatorConfig, OdometryConfig
+from icarus_vision.estimator.config import EstimatorConfig, OdometryConfig, config_for_detector
 from icarus_vision.estimator.estimate import fill_observation
 from icarus_vision.estimator.estimator import GateEstimator
 from icarus_vision.estimator.odometry import SimulatedOdometry
@@ -117,7 +117,7 @@ def evaluate_estimator(
             raise ValueError(f"detector {name} needs rendered frames (render=True)")
     base = resolve_track(track)
     quad = quad or QuadParams()
-    config = config or EstimatorConfig()
+    config = config or config_for_detector(name)
     camera = Camera.from_params(quad.camera)
     env = make_env("pybullet", config=EnvConfig(track=base, quad=quad, max_episode_s=max_time_s))
     scene = None

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from icarus_vision.estimator.config import EstimatorConfig, MeasurementConfig
+from icarus_vision.estimator.config import config_for_detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.policy.export import ExportedPolicy
 from icarus_vision.policy.pilots import resolve_policy
@@ -27,17 +27,7 @@ from icarus_vision.sim.registration import BACKENDS, make_env
 from icarus_vision.sim.track import Track
 
 DETECTORS = ("cnn", "opencv", "oracle")
-PIXEL_SIGMA = {"cnn": 8.0, "opencv": 1.5}
-"""Corner error (px, 1σ) the estimator assumes for each detector. The CNN's errors are heavy-tailed
-(eval-detector: median 2 px, mean 3 px, large gates 4-6 px, some false positives), so the filter
-trusts it as an 8 px sensor: chosen on race seeds 0-19 (3, 5, 8, 15 px tried), measured on others."""
 PLAN_CACHE = "runs/plans"
-
-
-def estimator_config(detector: str) -> EstimatorConfig:
-    """The estimator set up for a detector's corner noise."""
-    sigma = PIXEL_SIGMA.get(detector, 1.0)
-    return EstimatorConfig(measurement=MeasurementConfig(pixel_sigma=sigma))
 
 
 def time_optimal(track: Track, quad: QuadParams, cache_dir: str = PLAN_CACHE) -> float | None:
@@ -141,7 +131,7 @@ def run_race(
 
         rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector, camera=camera,
                        scene=scene, seed=seed, prior=base, latency_frames=latency_frames, on_frame=on_frame,
-                       estimator=estimator_config(det_name))  # fmt: skip
+                       estimator=config_for_detector(det_name))  # fmt: skip
     finally:
         env.close()
         if scene is not None:
