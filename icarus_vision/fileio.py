@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import tomllib
 from pathlib import Path
 
 
@@ -42,3 +43,22 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def atomic_write_json(path: str | os.PathLike, obj) -> None:
     """Write one JSON object atomically (indented, NaN refused so files stay standard JSON)."""
     atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+def read_toml(path: str | os.PathLike, what: str, error: type[Exception] = ValueError) -> dict:
+    """Parse a TOML file; a missing or malformed file raises ``error`` naming the file.
+
+    Args:
+        what: the kind of file, for the message ("track", "recipe", ...).
+        error: exception class for both cases (a ValueError subclass or FileNotFoundError).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise (FileNotFoundError if error is FileNotFoundError else error)(
+            f"{path}: {what} file not found"
+        )
+    try:
+        return tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        cls = ValueError if error is FileNotFoundError else error
+        raise cls(f"{path}: not a valid TOML file ({e})") from None

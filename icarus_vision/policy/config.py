@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 
+from icarus_vision.fileio import read_toml
 from icarus_vision.sim.config import RandomizationConfig, RewardConfig
 
 
@@ -219,13 +219,7 @@ def config_from_dict(data: dict, source: str = "<memory>") -> TrainConfig:
 
 def load_train_config(path: str | Path) -> TrainConfig:
     """Load a training config TOML; errors name the file and the key."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: config file not found")
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ValueError(f"{path}: not a valid TOML file ({e})") from None
+    data = read_toml(path, "config", FileNotFoundError)
     return config_from_dict(data, str(path))
 
 

@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 import typing
 from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
 
+from icarus_vision.fileio import read_toml
 from icarus_vision.render.textures import KINDS
 
 Range = tuple[float, float]
@@ -357,11 +356,5 @@ def recipe_from_dict(data: dict, source: str = "<memory>") -> Recipe:
 
 def load_recipe(path: str | os.PathLike) -> Recipe:
     """Load a recipe TOML file; ValueError names the file and the key on any problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: recipe file not found")
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ValueError(f"{path}: not a valid TOML file ({e})") from None
+    data = read_toml(path, "recipe", ValueError)
     return recipe_from_dict(data, source=str(path))

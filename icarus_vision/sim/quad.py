@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
 
-from icarus_vision.fileio import atomic_write_text
+from icarus_vision.fileio import atomic_write_text, read_toml
 
 GRAVITY = 9.81
 
@@ -144,13 +142,7 @@ def quad_from_dict(data: dict, source: str = "<memory>") -> QuadParams:
 
 def load_quad(path: str | os.PathLike) -> QuadParams:
     """Load a quadrotor TOML file; QuadError names the file on any problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise QuadError(f"{path}: quadrotor file not found")
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise QuadError(f"{path}: not a valid TOML file ({e})") from None
+    data = read_toml(path, "quadrotor", QuadError)
     return quad_from_dict(data, source=str(path))
 
 

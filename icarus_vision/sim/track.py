@@ -8,13 +8,11 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
-from icarus_vision.fileio import atomic_write_text
+from icarus_vision.fileio import atomic_write_text, read_toml
 
 DEFAULT_GATE_SIZE = 1.0
 DEFAULT_FRAME_WIDTH = 0.1
@@ -297,13 +295,7 @@ def track_from_dict(data: dict, source: str = "<memory>") -> Track:
 
 def load_track(path: str | os.PathLike) -> Track:
     """Load a track TOML file; TrackError names the file (and gate) on any problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise TrackError(f"{path}: track file not found")
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise TrackError(f"{path}: not a valid TOML file ({e})") from None
+    data = read_toml(path, "track", TrackError)
     return track_from_dict(data, source=str(path))
 
 
