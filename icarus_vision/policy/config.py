@@ -20,7 +20,7 @@ class PPOConfig:
     """Steps per drone per rollout."""
     batch_size: int = 4096
     """Minibatch size."""
-    n_epochs: int = 8
+    n_epochs: int = 5
     """Passes over each rollout."""
     learning_rate: float = 1e-3
     """Adam learning rate."""
@@ -43,8 +43,8 @@ class PPOConfig:
     advantage_norm: str = "minibatch"
     """"minibatch" (SB3's per-minibatch normalisation) or "running" (Welford statistics over all
     rollouts so far, applied to whole rollouts)."""
-    torch_threads: int = 1
-    """Torch intra-op threads (the simulator runs on the other core)."""
+    torch_threads: int = 2
+    """Torch intra-op threads (the update and the rollout alternate, so both cores serve the update)."""
 
 
 @dataclass(frozen=True)
