@@ -101,3 +101,21 @@ def test_plan_command_and_race_reports_time_optimal(tmp_path, monkeypatch):
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["time_optimal_s"] == pytest.approx(summary["time_optimal_s"], abs=1e-3)
     assert report["time_optimal_ratio"] > 1.0
+
+
+def test_race_refuses_a_policy_with_other_conventions(tmp_path):
+    import shutil
+
+    from icarus_vision.policy.pilots import default_policy_path
+
+    src = default_policy_path()
+    shutil.copy(src, tmp_path / "p.safetensors")
+    desc = json.loads(src.with_suffix(".json").read_text())
+    desc["action"] = "motor_speeds"
+    (tmp_path / "p.json").write_text(json.dumps(desc))
+    res = runner.invoke(
+        app, ["race", "--detector", "oracle", "--policy", str(tmp_path / "p.safetensors")]
+    )
+    assert (
+        res.exit_code == 1 and "action convention" in res.output and "Traceback" not in res.output
+    )

@@ -137,6 +137,10 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         raise ValueError(
             f"{js}: feature transform {desc.get('features')!r} (gate frame {desc.get('gate_frame')!r}) does not match {FEATURES_VERSION} (world)"
         )
+    if desc.get("obs_dim") not in OBS_DIMS.values():
+        raise ValueError(
+            f"{js}: observation of {desc.get('obs_dim')} entries does not match the 15-D or 21-D observation this simulator provides"
+        )
     if expect_obs_dim is not None and desc.get("obs_dim") != expect_obs_dim:
         raise ValueError(
             f"{js}: policy observes {desc.get('obs_dim')} entries but this run provides {expect_obs_dim}"

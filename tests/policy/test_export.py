@@ -51,6 +51,11 @@ def test_load_errors_name_the_file_and_mismatch(tmp_path):
     with pytest.raises(ValueError, match="bad.safetensors: corrupt"):
         load_policy(bad)
     desc = json.loads((tmp_path / "p.json").read_text())
+    desc["obs_dim"] = 17
+    (tmp_path / "p.json").write_text(json.dumps(desc))
+    with pytest.raises(ValueError, match="p.json: observation of 17 entries does not match"):
+        load_policy(path)
+    desc["obs_dim"] = 15
     desc["action"] = "motor_speeds"
     (tmp_path / "p.json").write_text(json.dumps(desc))
     with pytest.raises(ValueError, match="action convention"):
