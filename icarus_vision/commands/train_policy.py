@@ -78,8 +78,9 @@ def train_policy_cmd(
 
         try:
             result = train_policy(
-                cfg, out, seed=seed, resume=resume, timesteps=total, progress=progress
-            )
+                cfg, out, seed=seed, resume=resume, timesteps=total, progress=progress,
+                max_wall_s=None if max_minutes is None else 60.0 * max_minutes,
+            )  # fmt: skip
         except KeyboardInterrupt:
             console.print(f"interrupted: checkpoint saved; continue with --resume --out {out}")
             raise

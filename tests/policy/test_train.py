@@ -99,3 +99,34 @@ def test_ctrl_c_saves_a_resumable_checkpoint(tmp_path):
         TINY, out, seed=2, resume=True, timesteps=state["timesteps"] + 4096, verbose=0
     )
     assert res.timesteps >= state["timesteps"] + 4096
+
+
+def test_cli_train_policy_stops_at_max_minutes(tmp_path):
+    from typer.testing import CliRunner
+
+    from icarus_vision.cli import app
+
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(
+        'preset = "fast"\ncheckpoint_every = 1000000000\neval_every = 1000000000\n'
+        "[ppo]\nnum_envs = 16\nn_steps = 32\nbatch_size = 256\nn_epochs = 2\ntorch_threads = 1\n"
+    )
+    out = tmp_path / "run"
+    res = CliRunner().invoke(
+        app,
+        [
+            "train-policy",
+            "--config",
+            str(cfg),
+            "--timesteps",
+            "1000000000",
+            "--max-minutes",
+            "0.03",
+            "--out",
+            str(out),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    state = json.loads((out / "checkpoints" / "last_state.json").read_text())
+    assert 0 < state["timesteps"] < 1_000_000 and 1.5 <= state["wall_s"] < 30
+    assert (out / "policy.safetensors").is_file()
