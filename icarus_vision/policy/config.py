@@ -20,7 +20,7 @@ class PPOConfig:
     """Steps per drone per rollout."""
     batch_size: int = 4096
     """Minibatch size."""
-    n_epochs: int = 5
+    n_epochs: int = 7
     """Passes over each rollout."""
     learning_rate: float = 1e-3
     """Adam learning rate."""
