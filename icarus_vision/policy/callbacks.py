@@ -136,6 +136,7 @@ class MetricsCallback(BaseCallback):
         self.every = every
         self.rows: list[dict] = []
         self.returns: deque[float] = deque(maxlen=200)
+        self.term_sums: dict[str, deque] = {}  # named reward terms per episode, for TensorBoard
         self.progress = progress
         self._next = 0
         self._t0 = time.perf_counter()
@@ -151,9 +152,14 @@ class MetricsCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         for i in np.flatnonzero(self.locals["dones"]):
-            ep = self.locals["infos"][i].get("episode")
+            info = self.locals["infos"][i]
+            ep = info.get("episode")
             if ep:
                 self.returns.append(ep["r"])
+            for term, value in info.get("episode_reward_terms", {}).items():
+                self.term_sums.setdefault(term, deque(maxlen=200)).append(value)
+        for term, values in self.term_sums.items():
+            self.logger.record(f"reward/{term}", float(np.mean(values)))
         if self.progress is not None:
             self.progress(self.num_timesteps, self.curriculum)
         if self.num_timesteps >= self._next:

@@ -102,6 +102,7 @@ class RaceCore:
         self.gust_freq = np.zeros((n, 3, 3))
         self.gust_phase = np.zeros((n, 3, 3))
         self.ep_return = np.zeros(n)
+        self.ep_terms: dict[str, np.ndarray] = {}  # per-term episode sums
         self.ep_len = np.zeros(n, dtype=np.int64)
         self.lap_times: list[list[float]] = [[] for _ in range(n)]
 
@@ -219,6 +220,8 @@ class RaceCore:
         self.lap_start[idx] = 0.0
         self.last_lap_time[idx] = np.nan
         self.ep_return[idx] = 0.0
+        for sums in self.ep_terms.values():
+            sums[idx] = 0.0
         self.ep_len[idx] = 0
         return state
 
@@ -313,6 +316,8 @@ class RaceCore:
         terminated = crashed | all_passed
         truncated = (self.t >= self.max_t - 1e-9) & ~terminated
         self.ep_return += reward
+        for k, v in terms.items():
+            self.ep_terms.setdefault(k, np.zeros(self.n))[:] += v
         self.ep_len += 1
         return reward, terminated, truncated, crash_code, terms
 
@@ -349,6 +354,7 @@ class RaceCore:
             "lap_times": list(self.lap_times[i]),
             "time": float(self.t[i]),
             "reward_terms": {k: float(v[i]) for k, v in terms.items()},
+            "episode_reward_terms": {k: float(v[i]) for k, v in self.ep_terms.items()},
         }
 
 

@@ -234,3 +234,16 @@ def test_extended_observation():
     np.testing.assert_allclose(obs[18:21], np.array(g[1].pos) - obs[:3], atol=1e-5)
     vec = BatchedRacingVecEnv(2, track="three-gates", observation="extended")
     assert vec.reset().shape == (2, 21)
+
+
+def test_episode_reward_terms_sum_to_the_return():
+    vec = BatchedRacingVecEnv(4, track="single-gate", max_episode_s=1.0)
+    vec.seed(0)
+    vec.reset()
+    for _ in range(50):
+        _, _, done, infos = vec.step(np.tile([0.3, 0.0, 0.1, 0.0], (4, 1)))
+    assert done.all()
+    for info in infos:
+        terms = info["episode_reward_terms"]
+        assert set(terms) == {"progress", "gate", "crash", "attitude"}
+        assert sum(terms.values()) == pytest.approx(info["episode"]["r"], rel=1e-6, abs=1e-6)
