@@ -12,7 +12,6 @@ position, so perception errors can be told apart from control errors.
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -157,9 +156,3 @@ def _extended_from_estimate(est, estimator, od) -> np.ndarray:
     after = estimator.gate_after_position() if hasattr(estimator, "gate_after_position") else None
     rel_after = (after - od.pos) if after is not None else est.rel_world
     return np.concatenate((direction, rel_after))
-
-
-def timed(fn, *args, **kwargs):
-    t0 = time.perf_counter()
-    out = fn(*args, **kwargs)
-    return out, time.perf_counter() - t0

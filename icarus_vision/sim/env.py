@@ -16,7 +16,7 @@ from dataclasses import replace
 import gymnasium as gym
 import numpy as np
 
-from icarus_vision.sim import dynamics, rules
+from icarus_vision.sim import dynamics
 from icarus_vision.sim.config import EnvConfig
 from icarus_vision.sim.dynamics import QuadState
 from icarus_vision.sim.race_core import OBS_DIM, RaceCore, validate_action
@@ -169,5 +169,4 @@ __all__ = [
     "observation_space",
     "action_space",
     "make_config",
-    "rules",
 ]

@@ -358,9 +358,4 @@ class RaceCore:
         }
 
 
-def track_of(core: RaceCore, i: int) -> Track:
-    """The track drone ``i`` is flying this episode."""
-    return core.tracks[i]
-
-
-__all__ = ["OBS_DIM", "RaceCore", "validate_action", "jitter_track", "track_of"]
+__all__ = ["OBS_DIM", "RaceCore", "validate_action", "jitter_track"]
