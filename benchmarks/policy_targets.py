@@ -1,6 +1,7 @@
 """Policy learning-speed figures: single gate within one minute, and a curve plot of a run.
 
     .venv/bin/python benchmarks/policy_targets.py single-gate [--minutes 1] [--episodes 200]
+    .venv/bin/python benchmarks/policy_targets.py ten-gates [--minutes 20] [--episodes 300]
     .venv/bin/python benchmarks/policy_targets.py curves RUN_DIR [RUN_DIR ...] --png docs/policy_training_curves.png
 
 ``single-gate`` trains the fast preset on the single-gate stage for a wall-clock budget, then flies
@@ -38,6 +39,20 @@ def single_gate(minutes: float, episodes: int) -> dict:
             "crash_reasons": ev["crash_reasons"]}  # fmt: skip
 
 
+def ten_gates(minutes: float, episodes: int, out: Path) -> dict:
+    """The fast preset with the extended observation through the whole curriculum for a wall-clock
+    budget; the run's best and last models flown on random 10-gate tracks with randomisation."""
+    cfg = replace(FAST, observation="extended", checkpoint_every=2_000_000, eval_every=2_000_000)
+    res = train_policy(cfg, out, seed=0, timesteps=10**9, max_wall_s=60.0 * minutes, verbose=0)
+    row = {"minutes": minutes, "timesteps": res.timesteps}
+    for name in ("best", "policy"):
+        pol = load_policy(out / f"{name}.safetensors")
+        row[name] = evaluate_policy(
+            pol, None, episodes=episodes, num_gates=10, randomize=True, seed=5
+        )["success_rate"]
+    return row
+
+
 def _metrics(run: Path) -> list[dict]:
     if (run / "metrics.json").is_file():
         return json.loads((run / "metrics.json").read_text())
@@ -50,6 +65,10 @@ def main() -> None:
     a = sub.add_parser("single-gate")
     a.add_argument("--minutes", type=float, default=1.0)
     a.add_argument("--episodes", type=int, default=200)
+    t = sub.add_parser("ten-gates")
+    t.add_argument("--minutes", type=float, default=20.0)
+    t.add_argument("--episodes", type=int, default=300)
+    t.add_argument("--out", type=Path, default=Path("runs/policy-ten-gates"))
     c = sub.add_parser("curves")
     c.add_argument("runs", nargs="+", type=Path)
     c.add_argument("--png", type=Path, required=True)
@@ -57,6 +76,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.cmd == "single-gate":
         print(json.dumps(single_gate(args.minutes, args.episodes), indent=2))
+    elif args.cmd == "ten-gates":
+        print(json.dumps(ten_gates(args.minutes, args.episodes, args.out), indent=2))
     else:
         plot_training_curves({r.name: _metrics(r) for r in args.runs}, args.png, args.title)
         print(f"wrote {args.png}")
