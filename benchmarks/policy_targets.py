@@ -2,11 +2,16 @@
 
     .venv/bin/python benchmarks/policy_targets.py single-gate [--minutes 1] [--episodes 200]
     .venv/bin/python benchmarks/policy_targets.py ten-gates [--minutes 20] [--episodes 300]
+    .venv/bin/python benchmarks/policy_targets.py pybullet [--policy default] [--episodes 100] [--seeds 7 11 13]
     .venv/bin/python benchmarks/policy_targets.py curves RUN_DIR [RUN_DIR ...] --png docs/policy_training_curves.png
 
 ``single-gate`` trains the fast preset on the single-gate stage for a wall-clock budget, then flies
 the deterministic policy on that many random single-gate tracks (randomisation and perception noise
-as in training) and prints the success rate. ``curves`` plots success rate and return against
+as in training) and prints the success rate. ``ten-gates`` trains through the whole curriculum for
+a wall-clock budget and flies the run's best and last models on random 10-gate tracks.
+``pybullet`` flies a policy on the PyBullet backend with ground-truth observations on random
+10-gate tracks with randomisation on, ``--episodes`` tracks per seed, and pools the seeds.
+``curves`` plots success rate and return against
 wall-clock from runs' ``metrics.json`` (or ``checkpoints/last_state.json``).
 """
 
@@ -21,6 +26,7 @@ from pathlib import Path
 from icarus_vision.policy.config import FAST, CurriculumConfig
 from icarus_vision.policy.evaluate import evaluate_policy
 from icarus_vision.policy.export import load_policy
+from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.plots import plot_training_curves
 from icarus_vision.policy.train import train_policy
 
@@ -53,6 +59,24 @@ def ten_gates(minutes: float, episodes: int, out: Path) -> dict:
     return row
 
 
+def pybullet(policy: str, episodes: int, seeds: list[int]) -> dict:
+    pol = resolve_policy(policy)
+    rows = [
+        evaluate_policy(
+            pol, None, episodes=episodes, num_gates=10, backend="pybullet", randomize=True, seed=s
+        )
+        for s in seeds
+    ]
+    n_ok = sum(round(r["success_rate"] * r["episodes"]) for r in rows)
+    n = sum(r["episodes"] for r in rows)
+    reasons: dict[str, int] = {}
+    for r in rows:
+        for k, v in r["crash_reasons"].items():
+            reasons[k] = reasons.get(k, 0) + v
+    return {"policy": policy, "seeds": {s: r["success_rate"] for s, r in zip(seeds, rows, strict=True)},
+            "episodes": n, "success_rate": round(n_ok / n, 4), "crash_reasons": reasons}  # fmt: skip
+
+
 def _metrics(run: Path) -> list[dict]:
     if (run / "metrics.json").is_file():
         return json.loads((run / "metrics.json").read_text())
@@ -69,6 +93,10 @@ def main() -> None:
     t.add_argument("--minutes", type=float, default=20.0)
     t.add_argument("--episodes", type=int, default=300)
     t.add_argument("--out", type=Path, default=Path("runs/policy-ten-gates"))
+    b = sub.add_parser("pybullet")
+    b.add_argument("--policy", default="default")
+    b.add_argument("--episodes", type=int, default=100)
+    b.add_argument("--seeds", type=int, nargs="+", default=[7, 11, 13])
     c = sub.add_parser("curves")
     c.add_argument("runs", nargs="+", type=Path)
     c.add_argument("--png", type=Path, required=True)
@@ -78,6 +106,8 @@ def main() -> None:
         print(json.dumps(single_gate(args.minutes, args.episodes), indent=2))
     elif args.cmd == "ten-gates":
         print(json.dumps(ten_gates(args.minutes, args.episodes, args.out), indent=2))
+    elif args.cmd == "pybullet":
+        print(json.dumps(pybullet(args.policy, args.episodes, args.seeds), indent=2))
     else:
         plot_training_curves({r.name: _metrics(r) for r in args.runs}, args.png, args.title)
         print(f"wrote {args.png}")

@@ -18,7 +18,7 @@ import numpy as np
 
 from icarus_vision.planning.geometry import Layout
 from icarus_vision.planning.model import NU, NX, step_function
-from icarus_vision.planning.solver import SolverConfig, solve_nlp
+from icarus_vision.planning.solver import ShootingNlp, SolverConfig
 
 RK4_STEP_S = 0.03  # longest RK4 sub-step: ~1e-4 m, ~1e-3 m/s error per interval (tests/planning)
 INTERVAL_MARGIN = 1.5  # an interval may grow to this times the guess's longest before re-meshing
@@ -68,56 +68,26 @@ def solve_full(
     substeps = max(1, math.ceil(h_max / RK4_STEP_S))
     step = step_function(quad, substeps)
 
-    seg_t = ca.SX.sym("T", s_n)
-    xs = [ca.SX.sym(f"x{k}", NX) for k in range(k_int + 1)]
-    us = [ca.SX.sym(f"u{k}", NU) for k in range(k_int)]
-    g, lbg, ubg = [], [], []
-
-    def add(expr, lo, hi) -> None:
-        g.append(expr)
-        lbg.extend(np.broadcast_to(lo, (expr.shape[0],)))
-        ubg.extend(np.broadcast_to(hi, (expr.shape[0],)))
-
+    nlp = ShootingNlp(s_n, NX, NU, k_int)
+    xs, us, seg_t = nlp.xs, nlp.us, nlp.seg_t
     for k in range(k_int):
-        add(step(xs[k], us[k], seg_t[seg_of[k]] / n) - xs[k + 1], 0.0, 0.0)
+        nlp.add(step(xs[k], us[k], seg_t[seg_of[k]] / n) - xs[k + 1], 0.0, 0.0)
     for i, node in enumerate(layout.gate_nodes):
         for expr, lo, hi in layout.passage_constraints(i, xs[node][0:3], xs[node][3:6]):
-            add(expr, lo, hi)
+            nlp.add(expr, lo, hi)
 
     rate = np.asarray(quad.max_rate, float)
-    x_lo = np.concatenate([layout.pos_lo, np.full(NX - 3, -np.inf)])
-    x_hi = np.concatenate([layout.pos_hi, np.full(NX - 3, np.inf)])
-    u_lo = np.concatenate([[0.0], -rate])
-    u_hi = np.concatenate([[1.0], rate])
-    x = ca.vertcat(seg_t, *[ca.vertcat(xs[k], us[k]) for k in range(k_int)], xs[k_int])
-    x0 = [t_guess]
-    lbx = [np.full(s_n, 1e-3 * n)]
-    ubx = [np.full(s_n, substeps * RK4_STEP_S * n)]
-    for k in range(k_int + 1):
-        x0.append(x_guess[k])
-        lbx.append(x_guess[0] if k == 0 else x_lo)
-        ubx.append(x_guess[0] if k == 0 else x_hi)
-        if k < k_int:
-            x0.append(u_guess[k])
-            lbx.append(u_lo)
-            ubx.append(u_hi)
-    sol = solve_nlp(
+    x_lo = np.tile(np.concatenate([layout.pos_lo, np.full(NX - 3, -np.inf)]), (k_int + 1, 1))
+    x_hi = np.tile(np.concatenate([layout.pos_hi, np.full(NX - 3, np.inf)]), (k_int + 1, 1))
+    x_lo[0] = x_hi[0] = x_guess[0]
+    sol, seg_times, states, controls = nlp.solve(
         "full-model",
-        x,
         ca.sum1(seg_t),
-        ca.vertcat(*g),
-        x0=np.concatenate(x0),
-        lbx=np.concatenate(lbx),
-        ubx=np.concatenate(ubx),
-        lbg=np.asarray(lbg, float),
-        ubg=np.asarray(ubg, float),
+        guess=(t_guess, x_guess, u_guess),
+        lower=(1e-3 * n, x_lo, np.concatenate([[0.0], -rate])),
+        upper=(substeps * RK4_STEP_S * n, x_hi, np.concatenate([[1.0], rate])),
         cfg=cfg,
     )
-    seg_times = sol.x[:s_n]
-    body = sol.x[s_n:]
-    stride = NX + NU
-    states = np.array([body[stride * k : stride * k + NX] for k in range(k_int + 1)])
-    controls = np.array([body[stride * k + NX : stride * (k + 1)] for k in range(k_int)])
     h = seg_times[seg_of] / n
     nxt = np.array(step.map(k_int)(states[:-1].T, controls.T, h[None, :])).T
     defect = float(np.abs(nxt - states[1:]).max())

@@ -26,7 +26,7 @@ from icarus_vision.planning.geometry import (
     thrust_accel_limit,
     waypoint_polyline,
 )
-from icarus_vision.planning.solver import SolverConfig, solve_nlp
+from icarus_vision.planning.solver import ShootingNlp, SolverConfig
 from icarus_vision.sim.quad import GRAVITY, QuadParams
 
 G_VEC = np.array([0.0, 0.0, -GRAVITY])
@@ -114,32 +114,25 @@ def solve_point_mass(
     k_int = layout.num_intervals
     seg_of = layout.segment_of_interval()
 
-    seg_t = ca.SX.sym("T", s_n)
-    z = [ca.SX.sym(f"z{k}", 6) for k in range(k_int + 1)]
-    a = [ca.SX.sym(f"a{k}", 3) for k in range(k_int)]
-    g, lbg, ubg = [], [], []
-
-    def add(expr, lo, hi) -> None:
-        g.append(expr)
-        lbg.extend(np.broadcast_to(lo, (expr.shape[0],)))
-        ubg.extend(np.broadcast_to(hi, (expr.shape[0],)))
+    nlp = ShootingNlp(s_n, 6, 3, k_int)
+    seg_t, z, a = nlp.seg_t, nlp.xs, nlp.us
 
     def thrust_ok(acc, v) -> None:
         f = acc - G_VEC + c * v
         lim = a_max + e * ca.sqrt(ca.sumsqr(v) + 1e-6) if e > 0 else a_max
-        add(ca.sumsqr(f) - lim**2, -ca.inf, 0.0)
+        nlp.add(ca.sumsqr(f) - lim**2, -ca.inf, 0.0)
 
     for k in range(k_int):
         h = seg_t[seg_of[k]] / n
         p, v = z[k][:3], z[k][3:]
-        add(z[k + 1][:3] - (p + v * h + 0.5 * a[k] * h**2), 0.0, 0.0)
-        add(z[k + 1][3:] - (v + a[k] * h), 0.0, 0.0)
+        nlp.add(z[k + 1][:3] - (p + v * h + 0.5 * a[k] * h**2), 0.0, 0.0)
+        nlp.add(z[k + 1][3:] - (v + a[k] * h), 0.0, 0.0)
         thrust_ok(a[k], v)
         if c > 0 or e > 0:
             thrust_ok(a[k], z[k + 1][3:])
     for i, node in enumerate(layout.gate_nodes):
         for expr, lo, hi in layout.passage_constraints(i, z[node][:3], z[node][3:]):
-            add(expr, lo, hi)
+            nlp.add(expr, lo, hi)
 
     cost = ca.sum1(seg_t)
     if smoothing > 0:
@@ -147,39 +140,17 @@ def solve_point_mass(
 
     a_h = math.sqrt(max(a_max**2 - GRAVITY**2, 1e-6))
     t_guess, p_guess, v_guess = _straight_guess(layout, a_h)
-    blocks = [seg_t, *[ca.vertcat(z[k], a[k]) for k in range(k_int)], z[k_int]]
-    x = ca.vertcat(*blocks)
-    x0 = [t_guess]
-    lbx = [np.full(s_n, 1e-3 * n)]
-    ubx = [np.full(s_n, 1e3)]
-    for k in range(k_int + 1):
-        x0.append(np.concatenate([p_guess[k], v_guess[k]]))
-        lo = np.concatenate([layout.pos_lo, np.full(3, -np.inf)])
-        hi = np.concatenate([layout.pos_hi, np.full(3, np.inf)])
-        if k == 0:
-            lo = hi = np.concatenate([layout.start, np.zeros(3)])
-        lbx.append(lo)
-        ubx.append(hi)
-        if k < k_int:
-            x0.append(np.zeros(3))
-            lbx.append(np.full(3, -np.inf))
-            ubx.append(np.full(3, np.inf))
-    sol = solve_nlp(
+    z_lo = np.tile(np.concatenate([layout.pos_lo, np.full(3, -np.inf)]), (k_int + 1, 1))
+    z_hi = np.tile(np.concatenate([layout.pos_hi, np.full(3, np.inf)]), (k_int + 1, 1))
+    z_lo[0] = z_hi[0] = np.concatenate([layout.start, np.zeros(3)])
+    sol, seg_times, nodes, acc = nlp.solve(
         "point-mass",
-        x,
         cost,
-        ca.vertcat(*g),
-        x0=np.concatenate(x0),
-        lbx=np.concatenate(lbx),
-        ubx=np.concatenate(ubx),
-        lbg=np.asarray(lbg, float),
-        ubg=np.asarray(ubg, float),
+        guess=(t_guess, np.concatenate([p_guess, v_guess], axis=1), 0.0),
+        lower=(1e-3 * n, z_lo, -np.inf),
+        upper=(1e3, z_hi, np.inf),
         cfg=cfg,
     )
-    seg_times = sol.x[:s_n]
-    body = sol.x[s_n:]
-    nodes = np.array([body[9 * k : 9 * k + 6] for k in range(k_int + 1)])
-    acc = np.array([body[9 * k + 6 : 9 * k + 9] for k in range(k_int)])
     dt = seg_times[seg_of] / n
     t = np.concatenate([[0.0], np.cumsum(dt)])
     return PointMassSolution(
