@@ -38,6 +38,11 @@ def gen_dataset_cmd(
     workers: int = typer.Option(2, help="Worker processes, one PyBullet client each."),
     seed: int = typer.Option(0, help="Random seed."),
     force: bool = typer.Option(False, help="Overwrite a folder holding a different dataset."),
+    renderer: str = typer.Option(
+        "tiny",
+        help="tiny (PyBullet's TinyRenderer, CPU) or egl (its EGL plugin: OpenGL on the GPU, or "
+        "Mesa's software renderer without one).",
+    ),
 ) -> None:
     """Render racing-like FPV frames with labelled gate corners.
 
@@ -67,7 +72,9 @@ def gen_dataset_cmd(
             else:
                 bar.update(task, completed=done)
 
-        result = generate_dataset(recipe, out, num_images, workers, seed, force, progress)
+        result = generate_dataset(
+            recipe, out, num_images, workers, seed, force, progress, renderer=renderer
+        )
     m = result.manifest
     stats = m["stats"]
     splits = ", ".join(f"{k} {v}" for k, v in m["splits"].items())

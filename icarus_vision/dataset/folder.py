@@ -20,6 +20,8 @@ def _describe_difference(old: dict, new: dict) -> str:
     for key in ("seed", "num_images", "version", "format"):
         if old.get(key) != new.get(key):
             parts.append(f"{key} {old.get(key)!r}")
+    if old.get("renderer", "tiny") != new.get("renderer", "tiny"):  # absent: TinyRenderer
+        parts.append(f"renderer {old.get('renderer', 'tiny')!r}")
     return ", ".join(parts) or "other settings"
 
 

@@ -41,6 +41,7 @@ from icarus_vision.dataset.layout import (
 from icarus_vision.dataset.shard import read_valid_shard, write_shard
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.render.recipe import Recipe, load_recipe
+from icarus_vision.render.scene import RENDERERS
 
 FORMAT = "icarus-vision-dataset/1"
 """Layout version recorded in ``config.json`` and ``manifest.json``."""
@@ -91,22 +92,32 @@ def _init_worker(ticks: mp.Queue, tmp_dir: str) -> None:
     tempfile.tempdir = tmp_dir
 
 
-def _work(job: tuple[Recipe, int, ShardSpec, Path]) -> tuple[dict, int, float]:
-    recipe, seed, spec, out_dir = job
-    record = write_shard(recipe, seed, spec, out_dir, tick=lambda: _TICKS.put(1))
+Job = tuple[Recipe, int, ShardSpec, Path, str]
+"""One shard to render: recipe, seed, shard, output folder, renderer."""
+
+
+def _write(job: Job, tick: Callable[[], None]) -> dict:
+    recipe, seed, spec, out_dir, renderer = job
+    return write_shard(recipe, seed, spec, out_dir, tick, renderer)
+
+
+def _work(job: Job) -> tuple[dict, int, float]:
+    record = _write(job, tick=lambda: _TICKS.put(1))
     return record, os.getpid(), _peak_rss_mb()
 
 
-def _check_args(num_images: int, workers: int, seed: int) -> None:
+def _check_args(num_images: int, workers: int, seed: int, renderer: str) -> None:
     for name, value, low in (("num_images", num_images, 1), ("workers", workers, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    if renderer not in RENDERERS:
+        raise ValueError(f"renderer must be one of {', '.join(RENDERERS)}, got {renderer!r}")
 
 
 def _render(
-    jobs: list[tuple], workers: int, done: int, total: int, progress: ProgressFn | None
+    jobs: list[Job], workers: int, done: int, total: int, progress: ProgressFn | None
 ) -> tuple[list[dict], dict[int, float]]:
     """Render the shards of ``jobs``; returns their records and the peak RSS per worker pid."""
     if workers == 1:
@@ -119,7 +130,7 @@ def _render(
                 if progress is not None:
                     progress(done, total)
 
-            records.append(write_shard(*job, tick=tick))
+            records.append(_write(job, tick))
         return records, {os.getpid(): _peak_rss_mb()}
     main_file = getattr(sys.modules["__main__"], "__file__", None)
     if main_file is not None and not os.path.exists(main_file):  # e.g. a script read from stdin
@@ -160,6 +171,7 @@ def generate_dataset(
     seed: int = 0,
     force: bool = False,
     progress: ProgressFn | None = None,
+    renderer: str = "tiny",
 ) -> GenerationResult:
     """Generate (or resume) a labelled gate-keypoint dataset.
 
@@ -171,6 +183,9 @@ def generate_dataset(
         seed: base seed, >= 0.
         force: overwrite a folder holding a different dataset (or other files).
         progress: called with (done_images, total_images) as images are written.
+        renderer: ``"tiny"`` (TinyRenderer, CPU) or ``"egl"`` (PyBullet's EGL plugin: OpenGL on
+            the GPU, or Mesa's software renderer); recorded in ``manifest.json`` and, when not
+            tiny, in ``config.json``: a folder never mixes renderers.
 
     Returns:
         a :class:`GenerationResult`.
@@ -178,9 +193,10 @@ def generate_dataset(
     Raises:
         ValueError: bad arguments, a missing or malformed recipe (naming the key), or an output
             folder holding something else without ``force``.
+        RuntimeError: the renderer cannot run here (EGL: the plugin does not load).
     """
     t0 = time.perf_counter()
-    _check_args(num_images, workers, seed)
+    _check_args(num_images, workers, seed, renderer)
     recipe = load_recipe(recipe_path)
     out = Path(out_dir)
     identity = {
@@ -190,6 +206,10 @@ def generate_dataset(
         "num_images": num_images,
         "recipe": recipe.to_dict(),
     }
+    if renderer != "tiny":
+        # Renderers draw slightly different pixels, so a folder never mixes them; TinyRenderer
+        # datasets keep the identity they always had, and stay resumable.
+        identity["renderer"] = renderer
     identity = json.loads(json.dumps(identity))  # as read back from config.json (lists, not tuples)
     try:
         prepare_folder(out, identity, force)
@@ -206,11 +226,12 @@ def generate_dataset(
     t_render = time.perf_counter()
     if todo:
         mark_incomplete(out)
-        jobs = [(recipe, seed, s, out) for s in todo]
+        jobs = [(recipe, seed, s, out, renderer) for s in todo]
         records, rss = _render(jobs, workers, done, num_images, progress)
         found.update({r["name"]: r for r in records})
     render_s = time.perf_counter() - t_render
-    manifest = _finish(out, recipe, seed, num_images, specs, [found[s.name] for s in specs])
+    shard_records = [found[s.name] for s in specs]
+    manifest = _finish(out, recipe, seed, num_images, renderer, specs, shard_records)
     rendered = sum(s.count for s in todo)
     return GenerationResult(
         out_dir=out,
@@ -224,7 +245,13 @@ def generate_dataset(
 
 
 def _finish(
-    out: Path, recipe: Recipe, seed: int, num_images: int, specs: list[ShardSpec], records
+    out: Path,
+    recipe: Recipe,
+    seed: int,
+    num_images: int,
+    renderer: str,
+    specs: list[ShardSpec],
+    records,
 ) -> dict:
     """Write the split annotation files, the contact sheet and, last, the manifest."""
     info = {"recipe": recipe.name, "seed": seed, "version": __version__}
@@ -244,6 +271,7 @@ def _finish(
         "seed": seed,
         "num_images": num_images,
         "image_size": [recipe.dataset.width, recipe.dataset.height],
+        "renderer": renderer,
         "splits": split_counts(num_images, recipe.dataset.splits),
         "annotations": {s: f"{ANNOTATIONS}/{s}.json" for s in SPLITS},
         "contact_sheet": CONTACT_SHEET,

@@ -60,11 +60,19 @@ class Sample:
     gate_bodies: tuple[int, ...]
 
 
-def iter_samples(recipe: Recipe, seed: int, spec: ShardSpec) -> Iterator[Sample]:
+def iter_samples(
+    recipe: Recipe, seed: int, spec: ShardSpec, renderer: str = "tiny"
+) -> Iterator[Sample]:
     """Generate a shard's samples in order, from the shard's own random stream.
 
     Every ``recipe.dataset.frames_per_scene`` frames a new scene is drawn: a random track, its look,
     distractors and camera; then per frame a pose, the light and the sensor noise.
+
+    Args:
+        renderer: ``"tiny"`` or ``"egl"`` (:data:`~icarus_vision.render.scene.RENDERERS`).
+
+    Raises:
+        RuntimeError: the renderer cannot run here (EGL: the plugin does not load).
     """
     rng = spec.rng(seed)
     ds = recipe.dataset
@@ -75,7 +83,12 @@ def iter_samples(recipe: Recipe, seed: int, spec: ShardSpec) -> Iterator[Sample]
         track = sample_track(recipe.tracks, rng)
         vis = sample_visuals(recipe, rng, track, base)
         poses = sample_poses(recipe.poses, rng, track, vis.camera, len(scene_ids))
-        with Scene(track, vis.camera, vis.style, vis.distractors) as scene:
+        with Scene(track, vis.camera, vis.style, vis.distractors, egl=renderer == "egl") as scene:
+            if scene.renderer != renderer:  # a dataset never mixes renderers
+                raise RuntimeError(
+                    f"cannot render with {renderer!r} here (PyBullet's EGL plugin did not load); "
+                    "use the tiny renderer"
+                )
             for i, image_id in enumerate(scene_ids):
                 pos, quat = poses.pos[i], poses.quat[i]
                 frame = scene.render(pos, quat, sample_lighting(recipe, rng))
@@ -182,18 +195,20 @@ def write_shard(
     spec: ShardSpec,
     out_dir: Path,
     tick: Callable[[], None] | None = None,
+    renderer: str = "tiny",
 ) -> dict:
     """Render a shard, write its PNGs and then its record, each atomically.
 
     Args:
         tick: called after each image is written (progress).
+        renderer: ``"tiny"`` or ``"egl"``, as for :func:`iter_samples`.
 
     Returns:
         the shard record.
     """
     out_dir = Path(out_dir)
     images, annotations = [], []
-    for s in iter_samples(recipe, seed, spec):
+    for s in iter_samples(recipe, seed, spec, renderer):
         png = encode_png(s.rgb)
         atomic_write_bytes(out_dir / IMAGES / image_file_name(s.image_id), png)
         images.append({**image_dict(s), "sha256": hashlib.sha256(png).hexdigest()})

@@ -48,11 +48,14 @@ def paint_backdrop(
     ground_tile_m: float,
     ground_gain: np.ndarray,
     sky: np.ndarray,
+    shadow: np.ndarray | None = None,
+    shadow_gain: np.ndarray | None = None,
 ) -> None:
     """Fill the empty pixels (``seg == SKY_ID``) with ground or sky, in place.
 
     The ground texture is warped into the image by the plane's homography (texture repeated by
     wrapping), and faded to its mean colour where one pixel covers more than a quarter tile.
+    Ground pixels in ``shadow`` take ``shadow_gain`` instead of ``ground_gain``.
 
     Args:
         rgb: (H, W, 3) uint8 rendered image, modified.
@@ -65,6 +68,9 @@ def paint_backdrop(
         ground_tile_m: metres covered by one tile.
         ground_gain: (3,) lighting gain of the ground.
         sky: (H, W, 3) uint8 sky image.
+        shadow: (H, W) uint8, 1 where the ground lies in shadow (:mod:`~icarus_vision.render.shadows`),
+            None: nowhere.
+        shadow_gain: (3,) lighting gain of the ground in shadow (needed with ``shadow``).
     """
     empty = seg == SKY_ID
     if not empty.any():
@@ -120,5 +126,10 @@ def paint_backdrop(
         warped[b0:b1] = cv2.blendLinear(warped[b0:b1], mean, np.float32(1.0) - f, f)
     gain = tuple(float(x) for x in ground_gain) + (0.0,)
     cv2.copyTo(cv2.multiply(warped, gain), g.view(np.uint8), rgb[r0:r1])
+    if shadow is not None:
+        dark = np.logical_and(g, shadow[r0:r1].view(bool))
+        if dark.any():
+            gain = tuple(float(x) for x in shadow_gain) + (0.0,)
+            cv2.copyTo(cv2.multiply(warped, gain), dark.view(np.uint8), rgb[r0:r1])
     seg[r0:r1][g] = GROUND_ID
     depth[r0:r1][g] = (np.float32(-t[2]) * inv)[g]

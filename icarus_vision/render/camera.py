@@ -33,6 +33,9 @@ TINY_RENDERER_SAMPLE_OFFSET = (-0.5, 0.5)
 """Where PyBullet's TinyRenderer samples pixel (u, v) relative to its centre (measured: it covers
 pixel corners, rows flipped), so that :meth:`Camera.projection_matrix` can compensate."""
 
+HARDWARE_OPENGL_SAMPLE_OFFSET = (0.0, 0.0)
+"""The same for PyBullet's OpenGL renderer (the EGL plugin): it samples pixel centres (measured)."""
+
 
 def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
     """Pinhole matrix K for square pixels and a centred principal point.
@@ -288,7 +291,8 @@ class Camera:
         Args:
             sample_offset: where the rasteriser samples pixel (u, v), relative to its centre, in
                 pixels; compensated so that pixel (u, v) shows what K projects to (u, v).
-                TinyRenderer samples at (u - 0.5, v + 0.5): :data:`TINY_RENDERER_SAMPLE_OFFSET`.
+                TinyRenderer samples at (u - 0.5, v + 0.5): :data:`TINY_RENDERER_SAMPLE_OFFSET`;
+                OpenGL at the centre: :data:`HARDWARE_OPENGL_SAMPLE_OFFSET`.
         """
         k = self.K
         k[0, 2] += sample_offset[0]

@@ -76,6 +76,22 @@ def box_mesh(center, half_extents, tile_m: float = 1.0, long_axis: int | None = 
     return Mesh(np.array(verts), np.array(norms), np.array(uvs), np.array(idx, dtype=np.int32))
 
 
+BOX_VERTICES = 24
+"""Vertices of one :func:`box_mesh` (4 per face, the 8 corners first)."""
+
+
+def box_corners(mesh: Mesh) -> np.ndarray:
+    """Corners of each box of a mesh made of :func:`box_mesh` boxes (a box, a frame, a gate).
+
+    Returns:
+        (B, 8, 3) corners of the B boxes, the mesh's local frame.
+    """
+    v = mesh.vertices
+    if len(v) % BOX_VERTICES:
+        raise ValueError(f"not a mesh of boxes: {len(v)} vertices is no multiple of {BOX_VERTICES}")
+    return v.reshape(-1, BOX_VERTICES, 3)[:, :8]
+
+
 def frame_mesh(
     inner_w: float, inner_h: float, bar: float, depth: float, tile_m: float, sides: int = 4
 ) -> Mesh:

@@ -78,7 +78,8 @@ class LightRanges:
     color_jitter: float = 0.1
     """Each RGB channel of the white light is scaled by 1 - U(0, color_jitter)."""
     shadow_prob: float = 0.3
-    """Probability of rendering shadows (objects on objects; the ground is shaded but unshadowed)."""
+    """Probability of rendering shadows: objects on objects (TinyRenderer's shadow map) and on the
+    ground (:mod:`icarus_vision.render.shadows`)."""
 
 
 @dataclass(frozen=True)

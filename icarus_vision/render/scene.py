@@ -2,11 +2,15 @@
 
 Every call passes this scene's own ``physicsClientId``; the default client is never used, so many
 scenes (one per dataset worker) can live in one process. Rendering uses TinyRenderer (CPU, no
-display). ``egl=True`` is accepted but falls back to TinyRenderer with a warning (see ``_load_egl``).
+display) unless ``egl=True`` asks for PyBullet's EGL plugin (OpenGL; :mod:`.egl`), which builds the
+meshes from OBJ files instead of in-memory vertices; where the plugin cannot load, the scene warns
+and uses TinyRenderer. With ``Lighting.shadows`` the objects also shadow the ground
+(:mod:`.shadows`), which neither renderer does since the ground is ray-cast (:mod:`.backdrop`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import shutil
@@ -18,14 +22,23 @@ import cv2
 import numpy as np
 
 from icarus_vision.render.backdrop import paint_backdrop, ray_norms, shade_factor
-from icarus_vision.render.camera import TINY_RENDERER_SAMPLE_OFFSET, Camera
-from icarus_vision.render.meshes import Mesh, box_mesh, frame_mesh, gate_mesh
+from icarus_vision.render.camera import (
+    HARDWARE_OPENGL_SAMPLE_OFFSET,
+    TINY_RENDERER_SAMPLE_OFFSET,
+    Camera,
+)
+from icarus_vision.render.egl import load_egl_plugin, quiet_c_stdout, write_obj
+from icarus_vision.render.meshes import Mesh, box_corners, box_mesh, frame_mesh, gate_mesh
+from icarus_vision.render.shadows import cylinder_points, ground_shadow_mask, place, sphere_points
 from icarus_vision.render.style import DISTRACTOR_SHAPES, Distractor, Frame, Lighting, SceneStyle
 from icarus_vision.render.textures import Material, texture_image
 from icarus_vision.sim.bullet import p
 from icarus_vision.sim.track import Track
 
 __all__ = ["DISTRACTOR_SHAPES", "Distractor", "Frame", "Lighting", "Scene", "SceneStyle"]
+
+RENDERERS = ("tiny", "egl")
+"""Renderers of a scene (:attr:`Scene.renderer`): PyBullet's TinyRenderer, or its EGL plugin."""
 
 
 def _yaw_quat(yaw: float) -> list[float]:
@@ -41,7 +54,7 @@ class Scene:
         client: PyBullet physics client id of this scene.
         gate_bodies: body id of each physical gate, in ``track.physical_gates()`` order.
         distractor_bodies: body id of each distractor.
-        renderer: ``"tiny"`` (the only renderer for now).
+        renderer: ``"tiny"`` (TinyRenderer) or ``"egl"`` (the EGL plugin's OpenGL renderer).
     """
 
     def __init__(
@@ -59,6 +72,9 @@ class Scene:
         self.client = p.connect(p.DIRECT)
         self._tmp = Path(tempfile.mkdtemp(prefix="icarus-render-"))
         self._textures: dict[str, int] = {}
+        self._obj_files: dict[str, str] = {}
+        self._casters: list[np.ndarray] = []  # world points of each convex shadow-casting part
+        self._caster_arrays: tuple[np.ndarray, np.ndarray] | None = None
         self.renderer = "tiny"
         try:
             if egl:
@@ -75,13 +91,12 @@ class Scene:
 
     # -- building ---------------------------------------------------------------------------------
     def _load_egl(self) -> None:
-        # PyBullet 3.2.x's EGL plugin crashes (SIGSEGV) on in-memory meshes (createVisualShape with
-        # vertices), which every gate here is; until gates are also built from box primitives for
-        # it, asking for EGL falls back to TinyRenderer rather than loading the plugin.
-        warnings.warn(
-            "EGL rendering is not supported for procedural gate meshes yet; using TinyRenderer",
-            stacklevel=3,
-        )
+        try:
+            load_egl_plugin(self.client)
+        except RuntimeError as e:
+            warnings.warn(f"EGL rendering unavailable ({e}); using TinyRenderer", stacklevel=3)
+        else:
+            self.renderer = "egl"
 
     def _texture(self, material: Material) -> int:
         key = hashlib.sha1(repr(material).encode()).hexdigest()[:16]
@@ -91,16 +106,42 @@ class Scene:
             self._textures[key] = p.loadTexture(str(path), physicsClientId=self.client)
         return self._textures[key]
 
+    def _obj_file(self, mesh: Mesh) -> str:
+        """An OBJ file of ``mesh`` in this scene's folder (for the EGL plugin), written once."""
+        arrays = (mesh.vertices, mesh.normals, mesh.uvs, mesh.indices)
+        key = hashlib.sha1(b"".join(a.tobytes() for a in arrays)).hexdigest()[:16]
+        if key not in self._obj_files:
+            path = self._tmp / f"mesh-{key}.obj"
+            write_obj(mesh, path)
+            self._obj_files[key] = str(path)
+        return self._obj_files[key]
+
+    def _add_casters(self, parts: np.ndarray, pos, yaw: float) -> None:
+        """Shadow-casting convex parts: (P, K, 3) points of P parts, body frame at pos, yaw."""
+        self._casters += list(place(parts, pos, yaw))
+        self._caster_arrays = None
+
     def _add_mesh(self, mesh: Mesh, material: Material, pos, yaw: float = 0.0) -> int:
-        vis = p.createVisualShape(
-            p.GEOM_MESH,
-            vertices=mesh.vertices.tolist(),
-            indices=mesh.indices.tolist(),
-            normals=mesh.normals.tolist(),
-            uvs=mesh.uvs.tolist(),
-            rgbaColor=material.rgba,
-            physicsClientId=self.client,
-        )
+        """A static body of a mesh made of boxes (:func:`box_corners`), which cast shadows."""
+        if self.renderer == "egl":
+            vis = p.createVisualShape(
+                p.GEOM_MESH,
+                fileName=self._obj_file(mesh),
+                meshScale=[1.0, 1.0, 1.0],
+                rgbaColor=material.rgba,
+                physicsClientId=self.client,
+            )
+        else:
+            vis = p.createVisualShape(
+                p.GEOM_MESH,
+                vertices=mesh.vertices.tolist(),
+                indices=mesh.indices.tolist(),
+                normals=mesh.normals.tolist(),
+                uvs=mesh.uvs.tolist(),
+                rgbaColor=material.rgba,
+                physicsClientId=self.client,
+            )
+        self._add_casters(box_corners(mesh), pos, yaw)
         body = p.createMultiBody(
             baseMass=0.0,
             baseVisualShapeIndex=vis,
@@ -132,10 +173,13 @@ class Scene:
             return self._add_mesh(mesh, d.material, d.pos, math.radians(d.yaw_deg))
         if d.shape == "sphere":
             vis = p.createVisualShape(p.GEOM_SPHERE, radius=sx, physicsClientId=self.client)
+            part = sphere_points(sx)
         else:  # cylinder, pole
             vis = p.createVisualShape(
                 p.GEOM_CYLINDER, radius=sx, length=sz, physicsClientId=self.client
             )
+            part = cylinder_points(sx, sz)
+        self._add_casters(part[None], d.pos, math.radians(d.yaw_deg))
         body = p.createMultiBody(
             0.0, -1, vis, list(map(float, d.pos)), _yaw_quat(math.radians(d.yaw_deg)),
             physicsClientId=self.client,
@@ -175,22 +219,25 @@ class Scene:
         cam = camera or self.camera
         light = lighting or Lighting()
         w, h = cam.width, cam.height
-        renderer, offset = p.ER_TINY_RENDERER, TINY_RENDERER_SAMPLE_OFFSET
-        _, _, rgba, depth, seg = p.getCameraImage(
-            w,
-            h,
-            viewMatrix=cam.view_matrix(pos, quat),
-            projectionMatrix=cam.projection_matrix(offset),
-            lightDirection=list(map(float, light.direction)),
-            lightColor=list(map(float, light.color)),
-            lightDistance=100.0,
-            shadow=int(light.shadows),
-            lightAmbientCoeff=float(light.ambient),
-            lightDiffuseCoeff=float(light.diffuse),
-            lightSpecularCoeff=float(light.specular),
-            renderer=renderer,
-            physicsClientId=self.client,
-        )
+        egl = self.renderer == "egl"
+        with self._quiet():
+            _, _, rgba, depth, seg = p.getCameraImage(
+                w,
+                h,
+                viewMatrix=cam.view_matrix(pos, quat),
+                projectionMatrix=cam.projection_matrix(
+                    HARDWARE_OPENGL_SAMPLE_OFFSET if egl else TINY_RENDERER_SAMPLE_OFFSET
+                ),
+                lightDirection=list(map(float, light.direction)),
+                lightColor=list(map(float, light.color)),
+                lightDistance=100.0,
+                shadow=int(light.shadows),
+                lightAmbientCoeff=float(light.ambient),
+                lightDiffuseCoeff=float(light.diffuse),
+                lightSpecularCoeff=float(light.specular),
+                renderer=p.ER_BULLET_HARDWARE_OPENGL if egl else p.ER_TINY_RENDERER,
+                physicsClientId=self.client,
+            )
         rgb = cv2.cvtColor(np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4), cv2.COLOR_RGBA2RGB)
         seg = np.array(seg, dtype=np.int32).reshape(h, w)
         z = cam.depth_to_z(np.asarray(depth, dtype=np.float32).reshape(h, w)).astype(np.float32)
@@ -201,11 +248,28 @@ class Scene:
             sky = cv2.resize(np.ascontiguousarray(sky), (w, h), interpolation=cv2.INTER_NEAREST)
         r_wc, t_wc = cam.pose(pos, quat)
         gain = shade_factor(light.direction, light.color, light.ambient, light.diffuse)
+        shadow = shadow_gain = None
+        if light.shadows:
+            shadow = ground_shadow_mask(*self._shadow_casters(), light.direction, cam, r_wc, t_wc)
+            shadow_gain = shade_factor(light.direction, light.color, light.ambient, 0.0)
         paint_backdrop(
             rgb, seg, z, cam, self._rays[cam], r_wc, t_wc,
-            self._ground_tex, self.style.ground.tile_m, gain, sky,
+            self._ground_tex, self.style.ground.tile_m, gain, sky, shadow, shadow_gain,
         )  # fmt: skip
         return Frame(rgb, seg, z)
+
+    def _quiet(self) -> contextlib.AbstractContextManager:
+        """Silences the EGL plugin's banners (TinyRenderer prints none)."""
+        egl = getattr(self, "renderer", "tiny") == "egl"  # absent when __init__ failed early
+        return quiet_c_stdout() if egl else contextlib.nullcontext()
+
+    def _shadow_casters(self) -> tuple[np.ndarray, np.ndarray]:
+        """(M, 3) world points of every shadow-casting part, and (P,) the index of each one's first."""
+        if self._caster_arrays is None:
+            sizes = [len(c) for c in self._casters]
+            points = np.concatenate(self._casters) if sizes else np.zeros((0, 3))
+            self._caster_arrays = (points, np.cumsum([0] + sizes[:-1]).astype(np.intp))
+        return self._caster_arrays
 
     def gate_index_of_body(self, body: int) -> int | None:
         """Physical gate index of a body id, None for non-gate bodies."""
@@ -221,10 +285,11 @@ class Scene:
 
     # -- lifetime ---------------------------------------------------------------------------------
     def close(self) -> None:
-        """Disconnect the PyBullet client and delete the texture files (idempotent)."""
+        """Disconnect the PyBullet client and delete the texture and mesh files (idempotent)."""
         if getattr(self, "client", -1) >= 0:
             try:
-                p.disconnect(physicsClientId=self.client)
+                with self._quiet():
+                    p.disconnect(physicsClientId=self.client)
             except p.error:
                 pass
             self.client = -1

@@ -17,7 +17,8 @@ DISTRACTOR_SHAPES = ("box", "cylinder", "sphere", "frame", "arch", "pole")
 
 @dataclass(frozen=True)
 class Lighting:
-    """Light of one frame (PyBullet's directional light; TinyRenderer honours all of it)."""
+    """Light of one frame: PyBullet's directional light. TinyRenderer and the ground honour all of
+    it; the EGL renderer only the direction (fixed strengths, white light, no shadows on objects)."""
 
     direction: tuple[float, float, float] = (0.4, 0.3, 1.0)
     """World direction *towards* the light."""
@@ -30,7 +31,7 @@ class Lighting:
     specular: float = 0.05
     """Specular coefficient."""
     shadows: bool = False
-    """Cast shadows (TinyRenderer shadow map)."""
+    """Cast shadows: on objects (TinyRenderer's shadow map; not with EGL) and on the ground."""
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,15 @@ runner = CliRunner()
 def test_help_lists_the_options():
     res = runner.invoke(app, ["gen-dataset", "--help"])
     assert res.exit_code == 0
-    for opt in ("--recipe", "--out", "--num-images", "--workers", "--seed", "--force"):
+    for opt in (
+        "--recipe",
+        "--out",
+        "--num-images",
+        "--workers",
+        "--seed",
+        "--force",
+        "--renderer",
+    ):
         assert opt in res.output
 
 
@@ -55,6 +63,13 @@ def test_bad_numbers_give_one_line_errors(tiny_recipe, tmp_path, extra, message)
         app, ["gen-dataset", "--recipe", str(tiny_recipe), "--out", str(tmp_path / "o"), *extra]
     )
     assert message in _one_line_error(res)
+
+
+def test_unknown_renderer_gives_a_one_line_error(tiny_recipe, tmp_path):
+    args = ["--recipe", str(tiny_recipe), "--out", str(tmp_path / "o"), "--renderer", "opengl"]
+    res = runner.invoke(app, ["gen-dataset", *args])
+    assert "renderer must be one of tiny, egl, got 'opengl'" in _one_line_error(res)
+    assert not (tmp_path / "o").exists()
 
 
 def test_missing_and_malformed_recipes_give_one_line_errors(tmp_path):

@@ -10,6 +10,7 @@ import pytest
 from icarus_vision.dataset import generate_dataset
 from icarus_vision.dataset.layout import plan_shards, shard_path
 from icarus_vision.dataset.shard import read_valid_shard
+from icarus_vision.render import egl
 from icarus_vision.render.recipe import load_recipe
 
 from .conftest import TINY_IMAGES, files_of, write_recipe
@@ -176,3 +177,45 @@ def test_malformed_recipe_names_the_key(tmp_path):
         generate_dataset(bad, tmp_path / "ds", 4, workers=1)
     with pytest.raises(ValueError, match="recipe file not found"):
         generate_dataset(tmp_path / "missing.toml", tmp_path / "ds", 4, workers=1)
+
+
+def test_tiny_renderer_is_recorded_and_keeps_the_identity(reference):
+    out, result = reference
+    assert result.manifest["renderer"] == "tiny"
+    assert "renderer" not in json.loads((out / "config.json").read_text())  # as before: resumable
+
+
+def test_egl_dataset_has_the_same_labels_and_is_never_mixed_with_tiny(
+    reference, tiny_recipe, tmp_path
+):
+    out = tmp_path / "ds"
+    try:
+        result = generate_dataset(tiny_recipe, out, TINY_IMAGES, workers=1, seed=3, renderer="egl")
+    except RuntimeError as e:
+        pytest.skip(f"PyBullet's EGL renderer cannot load here: {e}")
+    assert result.manifest["renderer"] == "egl"
+    assert json.loads((out / "config.json").read_text())["renderer"] == "egl"
+    tiny = [json.loads(p.read_text()) for p in sorted((reference[0] / "shards").iterdir())]
+    gl = [json.loads(p.read_text()) for p in sorted((out / "shards").iterdir())]
+    tiny_anns = [a for r in tiny for a in r["annotations"]]
+    gl_anns = [a for r in gl for a in r["annotations"]]
+    assert len(gl_anns) == len(tiny_anns) > 0  # same scenes, poses and gates: the same labels
+    same_flags = 0
+    for a, b in zip(tiny_anns, gl_anns, strict=True):
+        assert (a["image_id"], a["corners_px"]) == (b["image_id"], b["corners_px"])
+        same_flags += a["keypoints"][2::3] == b["keypoints"][2::3]
+    assert same_flags >= 0.9 * len(tiny_anns)
+    with pytest.raises(ValueError, match="different dataset.*renderer 'egl'"):
+        generate_dataset(tiny_recipe, out, TINY_IMAGES, workers=1, seed=3)
+    again = generate_dataset(tiny_recipe, out, TINY_IMAGES, workers=1, seed=3, renderer="egl")
+    assert again.generated == () and again.manifest == result.manifest
+
+
+def test_egl_dataset_fails_where_the_plugin_cannot_load(monkeypatch, tiny_recipe, tmp_path):
+    monkeypatch.setattr(egl, "egl_plugin_path", lambda: None)
+    with (
+        pytest.warns(UserWarning, match="EGL rendering unavailable"),
+        pytest.raises(RuntimeError, match="cannot render with 'egl' here"),
+    ):
+        generate_dataset(tiny_recipe, tmp_path / "ds", 4, workers=1, renderer="egl")
+    assert not (tmp_path / "ds" / "manifest.json").exists()

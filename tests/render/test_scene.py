@@ -6,11 +6,13 @@ import numpy as np
 import pybullet as p
 import pytest
 
+from icarus_vision.render import egl
 from icarus_vision.render.backdrop import GROUND_ID, SKY_ID
 from icarus_vision.render.camera import Camera
 from icarus_vision.render.labels import frame_labels
 from icarus_vision.render.randomize import load_recipe, sample_visuals
 from icarus_vision.render.scene import Distractor, Lighting, Scene
+from icarus_vision.sim.dynamics import rpy_to_quat
 from icarus_vision.sim.random_track import random_track
 from icarus_vision.sim.track import Gate, Track
 
@@ -107,9 +109,43 @@ def test_every_distractor_shape_and_shadows_render():
         assert seen == set(scene.distractor_bodies)
 
 
-def test_egl_request_falls_back_to_tiny_renderer_with_a_warning():
-    with pytest.warns(UserWarning, match="TinyRenderer"):
+@pytest.mark.parametrize("plugin", [None, "missing-plugin.so"], ids=["absent", "unloadable"])
+def test_egl_request_falls_back_to_tiny_renderer_where_the_plugin_is_unavailable(
+    monkeypatch, tmp_path, plugin
+):
+    path = None if plugin is None else str(tmp_path / plugin)
+    monkeypatch.setattr(egl, "egl_plugin_path", lambda: path)
+    with pytest.warns(UserWarning, match="EGL rendering unavailable.*using TinyRenderer"):
         scene = Scene(Track("one", (Gate((4.0, 0.0, 2.0)),)), egl=True)
     with scene:
         assert scene.renderer == "tiny"
         assert scene.render(EYE, LEVEL).rgb.shape == (240, 320, 3)
+
+
+def test_egl_and_tiny_renderers_agree_on_the_masks(make_scene):
+    """The same scenes (every distractor shape, textures, random tracks) seen by both renderers."""
+    recipe = load_recipe(RECIPE)
+    rng = np.random.default_rng(5)
+    shapes = ("box", "cylinder", "sphere", "frame", "arch", "pole")
+    ds = tuple(
+        Distractor(s, (6.0, -4.0 + 1.6 * i, 1.0), (0.6, 0.4, 0.1)) for i, s in enumerate(shapes)
+    )
+    for _ in range(2):
+        track = random_track(5, seed=rng)
+        vis = sample_visuals(recipe, rng, track)
+        gates = track.gates[:3]
+        yaws = rpy_to_quat(np.array([[0.0, 0.0, g.yaw] for g in gates]))
+        poses = [(np.asarray(g.pos) - 4.0 * g.normal, q) for g, q in zip(gates, yaws, strict=True)]
+        poses.append((EYE - [0.0, 0.0, 1.0], LEVEL))
+        frames = {}
+        for renderer in ("tiny", "egl"):
+            args = (track, vis.camera, vis.style, vis.distractors + ds)
+            with make_scene(renderer, *args) as scene:
+                frames[renderer] = [scene.render(pos, q, vis.lighting) for pos, q in poses]
+        for tiny, gl in zip(frames["tiny"], frames["egl"], strict=True):
+            a, b = tiny.seg >= 0, gl.seg >= 0
+            both = a & b
+            assert a.sum() > 500 and both.sum() / (a | b).sum() > 0.95
+            assert np.mean(tiny.seg[both] == gl.seg[both]) > 0.99  # the same bodies
+            np.testing.assert_allclose(gl.depth[both], tiny.depth[both], rtol=0.01)
+            np.testing.assert_array_equal(tiny.seg[~a & ~b], gl.seg[~a & ~b])  # ground and sky
