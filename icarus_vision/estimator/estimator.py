@@ -25,23 +25,10 @@ import numpy as np
 
 from icarus_vision.estimator.config import EstimatorConfig
 from icarus_vision.estimator.estimate import NO_GATE_DISTANCE, NO_GATE_SIGMA, GateEstimate
-from icarus_vision.estimator.filter import (
-    GateTrack,
-    batch_mahalanobis_sq,
-    process_noise,
-    widen_heading,
-)
+from icarus_vision.estimator.filter import GateTrack, process_noise, update_tracks
+from icarus_vision.estimator.fusion import match_detections, solve_detections
 from icarus_vision.estimator.odometry import OdometryReading, check_odometry
-from icarus_vision.estimator.pnp import (
-    PnPSolution,
-    check_corners,
-    measure_candidates,
-    measurement_covariance,
-    pose_covariance,
-    scale_covariance,
-    to_measurement,
-    wrap_axis,
-)
+from icarus_vision.estimator.pnp import GateMeasurement, wrap_axis
 from icarus_vision.gate_detect.base import GateDetection
 from icarus_vision.render.camera import Camera
 from icarus_vision.sim.dynamics import quat_to_rot
@@ -66,6 +53,7 @@ class GateEstimator:
             raise ValueError("map-aided mode needs a prior map (a Track); use mode='map-free'")
         self.prior = prior if self.config.mode == "map-aided" else None
         self._k = camera.K
+        self._image_size = (camera.width, camera.height)
         self._r_body_cam = camera.r_body_cam
         self._q = process_noise(self.config.filter)
         self.reset()
@@ -83,6 +71,7 @@ class GateEstimator:
         self._last_passed = -1
         self._passed: set[int] = set()
         self._odom: OdometryReading | None = None
+        self._r_wb = np.eye(3)  # attitude of the latest odometry reading, body -> world
         self._rejected: deque = deque()
         if self.prior is not None:
             self._load_prior(self.prior)
@@ -136,12 +125,13 @@ class GateEstimator:
         prev = self._odom
         dt = 0.0 if prev is None else max(odom.t - prev.t, 0.0)
         if dt > 0:
-            q_dt = self._q * dt
+            q_dt = np.diag(self._q * dt)
             for tr in self.tracks:
                 tr.add_noise(q_dt)
         if prev is not None:
             self._check_passage(prev.pos, odom.pos)
         self._odom = odom
+        self._r_wb = quat_to_rot(odom.quat[None] / np.linalg.norm(odom.quat))[0]
         if self.config.mode == "map-free":
             self._prune(odom.t)
             self._select_target(odom)
@@ -237,88 +227,38 @@ class GateEstimator:
 
     # -- measurement update --------------------------------------------------------------------
     def _fuse(self, odom: OdometryReading, detections: list[GateDetection]) -> bool:
-        c = self.config
-        mcfg = c.measurement
-        r_wc = quat_to_rot(odom.quat[None] / np.linalg.norm(odom.quat))[0] @ self._r_body_cam
-        t_wc = odom.pos
-        pairs = []  # (score, detection index, track index, measurement)
-        means = np.array([tr.mean for tr in self.tracks]).reshape(-1, 4)
-        covs = np.array([tr.cov for tr in self.tracks]).reshape(-1, 4, 4)
-        track_size = np.array([tr.size for tr in self.tracks])
-        sizes = sorted(set(track_size.tolist()))
-        sigma = mcfg.pixel_sigma
-        unmatched = []
-        for di, det in enumerate(detections):
-            self.counts["detections"] += 1
-            reason = check_corners(det.corners, self.camera.width, self.camera.height, mcfg)
-            if reason is not None:
-                self.counts[f"rejected_{reason}"] += 1
-                continue
-            sols, costs = measure_candidates(det.corners, 1.0, self._k, r_wc, t_wc, mcfg)
-            if not sols:
-                self.counts["rejected_pnp_failed"] += 1
-                continue
-            if np.linalg.norm(sols[0].t_cam_gate) * self._size_guess() > mcfg.max_range_m:
-                self.counts["rejected_range"] += 1
-                continue
-            cov6 = pose_covariance(self._k, sols[0].r_cam_gate, sols[0].t_cam_gate, 1.0, sigma)
-            best = None
-            for size in sizes:
-                idx = np.flatnonzero(track_size == size)
-                ms = self._measurements(sols, costs, cov6, size, r_wc, t_wc)
-                d2 = batch_mahalanobis_sq(means[idx], covs[idx], ms)  # (solutions, gates)
-                score = d2 + (costs - costs[0])[:, None]
-                k, j = np.unravel_index(int(np.argmin(score)), score.shape)
-                if best is None or score[k, j] < best[0]:
-                    m = ms[k]
-                    if len(ms) == 2:  # the other solution is still plausible: widen the heading
-                        m = widen_heading(m, ms[1 - k], float(score[1 - k, j] - score[k, j]))
-                    best = (float(score[k, j]), float(d2[k, j]), int(idx[j]), m)
-            if best is not None and best[1] <= c.filter.gate_chi2:
-                pairs.append((best[0], di, best[2], best[3]))
-            else:
-                size = self._size_guess()
-                ms = self._measurements(sols, costs, cov6, size, r_wc, t_wc)
-                m = (
-                    ms[0]
-                    if len(ms) == 1
-                    else widen_heading(ms[0], ms[1], float(costs[1] - costs[0]))
-                )
-                unmatched.append(m)
-        measured = False
-        used: set[int] = set()
-        for _, _, ti, m in sorted(pairs, key=lambda p: p[0]):
-            if ti in used:
+        """Update the gate tracks with a frame's detections (see :mod:`.fusion`); whether the
+        next gate was among them."""
+        r_wc, t_wc = self._r_wb @ self._r_body_cam, odom.pos
+        size = self._size_guess()
+        sols, reasons = solve_detections(
+            detections, self._k, self._image_size, r_wc, t_wc, self.config.measurement, size
+        )
+        if detections:
+            self.counts["detections"] += len(detections)
+        self.counts.update(f"rejected_{r}" for r in reasons if r is not None)
+        if sols is None:
+            return False
+        pairs, unmatched = match_detections(sols, self.tracks, size, r_wc, t_wc, self.config)
+        chosen: dict[int, GateMeasurement] = {}  # track -> its best-scoring measurement
+        for _, ti, m in sorted(pairs, key=lambda p: p[0]):
+            if ti in chosen:
                 self.counts["duplicates"] += 1
-                continue
-            used.add(ti)
-            self.tracks[ti].update(m, odom.t)
-            self.counts["accepted"] += 1
-            measured |= ti == self._target_track()
+            else:
+                chosen[ti] = m
+        if chosen:
+            update_tracks([self.tracks[ti] for ti in chosen], list(chosen.values()), odom.t)
+            self.counts["accepted"] += len(chosen)
         for m in unmatched:
             self._unmatched(m, odom.t)
-        return measured
-
-    def _measurements(self, sols, costs, cov6, size: float, r_wc, t_wc) -> list:
-        """World-frame measurements of unit-size PnP solutions scaled to a gate of ``size``.
-
-        Both solutions share the covariance of the best one (they differ by a small flip).
-        """
-        mcfg = self.config.measurement
-        dist = size * math.sqrt(float(sols[0].t_cam_gate @ sols[0].t_cam_gate))
-        cov = measurement_covariance(scale_covariance(cov6, size), dist, r_wc, mcfg)
-        out = []
-        for sol, cost in zip(sols, costs, strict=True):
-            scaled = PnPSolution(sol.r_cam_gate, sol.t_cam_gate * size, sol.sq_err)
-            out.append(to_measurement(scaled, cov, r_wc, t_wc, float(cost)))
-        return out
+        return self._target_track() in chosen
 
     def _size_guess(self) -> float:
         return (
             self.tracks[0].size if self.prior is not None and self.tracks else self.config.gate_size
         )
 
-    def _unmatched(self, m, t: float) -> None:
+    def _unmatched(self, m: GateMeasurement, t: float) -> None:
         """A detection no gate explains: an outlier, a wrong prior, or (map-free) a new gate."""
         fc = self.config.filter
         if self.config.mode == "map-free":
@@ -350,8 +290,7 @@ class GateEstimator:
 
     # -- output ---------------------------------------------------------------------------------
     def _estimate(self, measured: bool) -> GateEstimate:
-        odom = self._odom
-        r_wb = quat_to_rot(odom.quat[None] / np.linalg.norm(odom.quat))[0]
+        odom, r_wb = self._odom, self._r_wb
         gi = self._target_track()
         if gi < 0:
             rel_body = np.array([NO_GATE_DISTANCE, 0.0, 0.0])

@@ -15,6 +15,8 @@ import numpy as np
 from icarus_vision.estimator.config import FilterConfig
 from icarus_vision.estimator.pnp import GateMeasurement, wrap_axis
 
+_EYE4 = np.eye(4)
+
 
 def process_noise(cfg: FilterConfig) -> np.ndarray:
     """(4,) variance added per second to (x, y, z, heading) by odometry drift."""
@@ -42,60 +44,68 @@ def mahalanobis_sq(mean: np.ndarray, cov: np.ndarray, z: GateMeasurement) -> flo
 
 
 def batch_mahalanobis_sq(
-    means: np.ndarray, covs: np.ndarray, zs: list[GateMeasurement]
+    means: np.ndarray, covs: np.ndarray, z: np.ndarray, r: np.ndarray
 ) -> np.ndarray:
-    """Squared Mahalanobis distances of K measurements from M predictions.
+    """Squared Mahalanobis distances of measurements from M gate predictions.
 
     Args:
         means: (M, 4) gate states; covs: (M, 4, 4) their covariances.
-        zs: K measurements.
+        z: (..., K, 4) measured positions and headings, K alternatives sharing a covariance.
+        r: (..., 4, 4) the covariance of each K alternatives.
 
     Returns:
-        (K, M) χ² values (4 dof).
+        (..., K, M) χ² values (4 dof).
     """
-    z = np.array([[*m.pos, m.yaw] for m in zs])  # (K, 4)
-    r = np.array([m.cov for m in zs])  # (K, 4, 4)
-    nu = z[:, None, :] - means[None]
+    nu = z[..., None, :, :] - means[:, None, :]  # (..., M, K, 4)
     nu[..., 3] = wrap_axis(nu[..., 3])
-    sol = np.linalg.solve(covs[None] + r[:, None], nu[..., None])[..., 0]
-    return np.einsum("kmi,kmi->km", nu, sol)
+    sol = np.linalg.solve(covs + r[..., None, :, :], np.swapaxes(nu, -1, -2))  # (..., M, 4, K)
+    return np.einsum("...mki,...mik->...km", nu, sol)
 
 
 def kf_update(
-    mean: np.ndarray, cov: np.ndarray, z: GateMeasurement
+    mean: np.ndarray, cov: np.ndarray, z: np.ndarray, r: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman update with a direct measurement of (position, heading) (Joseph form).
+    """Kalman updates with direct measurements of (position, heading) (Joseph form).
+
+    Args:
+        mean: (..., 4) and cov: (..., 4, 4) gate states.
+        z: (..., 4) measured positions and headings; r: (..., 4, 4) their covariances.
 
     Returns:
-        (4,) mean and (4, 4) covariance.
+        (..., 4) means and (..., 4, 4) covariances.
     """
-    nu = innovation(mean, z)
-    s = cov + z.cov
-    gain = np.linalg.solve(s, cov).T  # cov s⁻¹ (both symmetric)
-    new_mean = mean + gain @ nu
-    new_mean[3] = wrap_axis(new_mean[3])
-    a = np.eye(4) - gain
-    new_cov = a @ cov @ a.T + gain @ z.cov @ gain.T
-    return new_mean, 0.5 * (new_cov + new_cov.T)
+    nu = z - mean
+    nu[..., 3] = wrap_axis(nu[..., 3])
+    gain = np.swapaxes(np.linalg.solve(cov + r, cov), -1, -2)  # cov s⁻¹ (both symmetric)
+    new_mean = mean + (gain @ nu[..., None])[..., 0]
+    new_mean[..., 3] = wrap_axis(new_mean[..., 3])
+    a = _EYE4 - gain
+    new_cov = a @ cov @ np.swapaxes(a, -1, -2) + gain @ r @ np.swapaxes(gain, -1, -2)
+    return new_mean, 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2))
 
 
-def widen_heading(m: GateMeasurement, alt: GateMeasurement, gap: float) -> GateMeasurement:
-    """Account for the other PnP solution in a measurement's heading variance.
+def heading_spread(yaw: float, alt_yaw: float, gap: float) -> float:
+    """Heading variance (rad²) that the other PnP solution adds to a measurement (0 if negligible).
 
     The heading likelihood is bimodal; with the alternative's weight w = 1 / (1 + exp(gap / 2))
     (``gap``: its score minus the chosen one's, a χ²-like difference) the variance grows by
     w · Δheading², so that ambiguous views cannot make a gate's heading confidently wrong.
     """
     w = 1.0 / (1.0 + math.exp(min(gap, 60.0) / 2.0))
-    dyaw = float(wrap_axis(alt.yaw - m.yaw))
-    if w * dyaw * dyaw < 1e-8:
+    dyaw = wrap_axis(float(alt_yaw - yaw))
+    spread = w * dyaw * dyaw
+    return 0.0 if spread < 1e-8 else spread
+
+
+def widen_heading(m: GateMeasurement, alt: GateMeasurement, gap: float) -> GateMeasurement:
+    """Account for the other PnP solution in a measurement's heading variance
+    (:func:`heading_spread`)."""
+    spread = heading_spread(m.yaw, alt.yaw, gap)
+    if spread == 0.0:
         return m
     cov = m.cov.copy()
-    cov[3, 3] += w * dyaw * dyaw
+    cov[3, 3] += spread
     return replace(m, cov=cov)
-
-
-_DIAG = np.diag_indices(4)
 
 
 class GateTrack:
@@ -137,16 +147,14 @@ class GateTrack:
         self.cov = kf_predict(self.cov, dt, cfg)
 
     def add_noise(self, q_dt: np.ndarray) -> None:
-        """Add (4,) variances to the diagonal (a prediction with precomputed process noise)."""
-        self.cov[_DIAG] += q_dt
+        """Add a (4, 4) diagonal process noise to the covariance (a prediction, precomputed)."""
+        self.cov += q_dt
 
     def distance_sq(self, z: GateMeasurement) -> float:
         return mahalanobis_sq(self.mean, self.cov, z)
 
     def update(self, z: GateMeasurement, t: float) -> None:
-        self.mean, self.cov = kf_update(self.mean, self.cov, z)
-        self.hits += 1
-        self.last_hit_t = t
+        update_tracks([self], [z], t)
 
     def reinit(self, z: GateMeasurement, t: float) -> None:
         """Restart from a measurement (the prior was wrong)."""
@@ -154,3 +162,19 @@ class GateTrack:
         self.cov = z.cov.copy()
         self.hits += 1
         self.last_hit_t = t
+
+
+def update_tracks(tracks: list[GateTrack], zs: list[GateMeasurement], t: float) -> None:
+    """Update distinct gate tracks with one measurement each, at time ``t`` (one batched update)."""
+    if not tracks:
+        return
+    means, covs = kf_update(
+        np.array([tr.mean for tr in tracks]),
+        np.array([tr.cov for tr in tracks]),
+        np.array([[*z.pos.tolist(), z.yaw] for z in zs]),
+        np.array([z.cov for z in zs]),
+    )
+    for tr, mean, cov in zip(tracks, means, covs, strict=True):
+        tr.mean, tr.cov = mean, cov
+        tr.hits += 1
+        tr.last_hit_t = t

@@ -36,18 +36,21 @@ class OdometryReading:
     omega: np.ndarray
 
 
+_SHAPES = (("pos", 3), ("vel", 3), ("quat", 4), ("omega", 3))
+
+
 def check_odometry(odom: OdometryReading) -> None:
     """Raise ValueError when a reading has a non-finite entry, a bad shape or a zero quaternion."""
-    shapes = {"pos": 3, "vel": 3, "quat": 4, "omega": 3}
-    for name, n in shapes.items():
+    for name, n in _SHAPES:
         a = np.asarray(getattr(odom, name), dtype=float)
         if a.shape != (n,):
             raise ValueError(f"odometry {name} must have shape ({n},), got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"odometry {name} is not finite: {a.tolist()}")
+        values = a.tolist()  # plain floats: a few numbers, no numpy calls
+        if not all(map(math.isfinite, values)):
+            raise ValueError(f"odometry {name} is not finite: {values}")
     if not math.isfinite(odom.t):
         raise ValueError(f"odometry time is not finite: {odom.t}")
-    if np.linalg.norm(odom.quat) < 1e-6:
+    if math.hypot(*np.asarray(odom.quat, dtype=float).tolist()) < 1e-6:
         raise ValueError("odometry quaternion has zero norm")
 
 

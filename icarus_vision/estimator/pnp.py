@@ -14,6 +14,7 @@ the gate away from vertical (gates stand upright), and by a heading prior when o
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -27,6 +28,11 @@ R_GATE_SQUARE = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 _R_SQUARE_GATE = R_GATE_SQUARE.T.copy()
 _EYE3 = np.eye(3)
+_EYE6 = np.eye(6)
+_HALF_PI = math.pi / 2
+# -[r]× = [[0, rz, -ry], [-rz, 0, rx], [ry, -rx, 0]], flattened: r[_SKEW_INDEX] * _NEG_SKEW_SIGN.
+_SKEW_INDEX = np.array([0, 2, 1, 2, 0, 0, 1, 0, 0])
+_NEG_SKEW_SIGN = np.array([0.0, 1.0, -1.0, -1.0, 0.0, 1.0, 1.0, -1.0, 0.0])
 
 REJECT_REASONS = ("non_finite", "outside_image", "too_small", "degenerate", "pnp_failed", "range")
 """Why a detection can be rejected before the filter sees it (counted by the estimator)."""
@@ -38,9 +44,12 @@ def gate_points(size: float) -> np.ndarray:
     return np.array([[0.0, h, h], [0.0, -h, h], [0.0, -h, -h], [0.0, h, -h]])
 
 
+@functools.cache
 def _square_points(size: float) -> np.ndarray:
     h = size / 2.0
-    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    points = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    points.flags.writeable = False  # shared between calls
+    return points
 
 
 def check_corners(
@@ -58,9 +67,11 @@ def check_corners(
         that mirrors the gate.
     """
     c = np.asarray(corners, dtype=float)
-    if c.shape != (4, 2) or not np.isfinite(c).all():
+    if c.shape != (4, 2):
         return "non_finite"
     (u0, v0), (u1, v1), (u2, v2), (u3, v3) = c.tolist()  # plain floats: 8 numbers, no numpy calls
+    if not all(map(math.isfinite, (u0, v0, u1, v1, u2, v2, u3, v3))):
+        return "non_finite"
     lo, m = -0.5 - cfg.image_margin_px, cfg.image_margin_px
     if min(u0, u1, u2, u3, v0, v1, v2, v3) < lo:
         return "outside_image"
@@ -121,7 +132,8 @@ def solve_square_pnp(corners: np.ndarray, size: float, k: np.ndarray) -> list[Pn
     out = []
     for i in range(n):
         t = tvecs[i].reshape(3)
-        if not (np.all(np.isfinite(t)) and t[2] > 0):
+        tx, ty, tz = t.tolist()
+        if not (math.isfinite(tx) and math.isfinite(ty) and math.isfinite(tz) and tz > 0):
             continue
         r_cam_square, _ = cv2.Rodrigues(rvecs[i])
         # OpenCV reports the RMS over the 8 coordinates.
@@ -133,32 +145,35 @@ def solve_square_pnp(corners: np.ndarray, size: float, k: np.ndarray) -> list[Pn
 def pose_covariance(
     k: np.ndarray, r_cam_gate: np.ndarray, t_cam_gate: np.ndarray, size: float, sigma_px: float
 ) -> np.ndarray:
-    """First-order covariance of a PnP pose from independent corner noise of σ pixels.
+    """First-order covariance of PnP poses from independent corner noise of σ pixels.
 
     The pose is perturbed as p_cam = exp([δθ]×) R p_gate + t + δt (δθ about the gate centre, camera
     axes), so the covariance's first block is directly the gate centre's. It grows with distance
     (the square of it along the line of sight) and with the viewing angle (foreshortening).
 
+    Args:
+        k: (3, 3) camera intrinsics.
+        r_cam_gate: (..., 3, 3) gate axes in the camera frame; t_cam_gate: (..., 3) its centre, m.
+        size: side of the opening, m.
+
     Returns:
-        (6, 6) covariance of (δt, δθ) in the camera frame, m² and rad².
+        (..., 6, 6) covariance of (δt, δθ) in the camera frame, m² and rad².
     """
-    rp = gate_points(size) @ r_cam_gate.T  # (4, 3) corner offsets, camera frame
-    pc = rp + t_cam_gate
-    x, y, iz = pc[:, 0], pc[:, 1], 1.0 / pc[:, 2]
+    rp = gate_points(size) @ np.swapaxes(r_cam_gate, -1, -2)  # (..., 4, 3) corner offsets, camera
+    pc = rp + t_cam_gate[..., None, :]
+    x, y, iz = pc[..., 0], pc[..., 1], 1.0 / pc[..., 2]
     fx, fy = k[0, 0], k[1, 1]
-    # d(u, v)/d(point) for each corner, then d(point)/d(δt) = I and d(point)/d(δθ) = -[rp]×.
+    # Chain rule per corner: d(u, v)/d(point) (2, 3), then d(point)/d(δt, δθ) = [I, -[rp]×] (3, 6).
     a, b = fx * iz, -fx * x * iz * iz  # du/dx, du/dz
     c, d = fy * iz, -fy * y * iz * iz  # dv/dy, dv/dz
-    rx, ry, rz = rp[:, 0], rp[:, 1], rp[:, 2]
-    jac = np.empty((4, 2, 6))
-    jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = a, 0.0, b
-    jac[:, 1, 0], jac[:, 1, 1], jac[:, 1, 2] = 0.0, c, d
-    # (-[r]×) rows: [0, rz, -ry], [-rz, 0, rx], [ry, -rx, 0]
-    jac[:, 0, 3], jac[:, 0, 4], jac[:, 0, 5] = b * ry, a * rz - b * rx, -a * ry
-    jac[:, 1, 3], jac[:, 1, 4], jac[:, 1, 5] = -c * rz + d * ry, -d * rx, c * rx
-    jac = jac.reshape(8, 6)
-    info = jac.T @ jac / sigma_px**2
-    return np.linalg.inv(info + 1e-12 * np.eye(6))
+    proj = np.zeros((*a.shape, 2, 3))
+    proj[..., 0, 0], proj[..., 0, 2], proj[..., 1, 1], proj[..., 1, 2] = a, b, c, d
+    lever = np.empty((*a.shape, 3, 6))
+    lever[..., :3] = _EYE3
+    lever[..., 3:] = (rp[..., _SKEW_INDEX] * _NEG_SKEW_SIGN).reshape(*a.shape, 3, 3)
+    jac = (proj @ lever).reshape(*a.shape[:-1], 8, 6)
+    info = np.swapaxes(jac, -1, -2) @ jac / sigma_px**2
+    return np.linalg.inv(info + 1e-12 * _EYE6)
 
 
 def gate_yaw(r_world_gate: np.ndarray) -> float:
@@ -167,7 +182,12 @@ def gate_yaw(r_world_gate: np.ndarray) -> float:
 
 
 def wrap_axis(angle: np.ndarray | float) -> np.ndarray | float:
-    """Wrap an angle between two axes (headings modulo π) into [-π/2, π/2)."""
+    """Wrap an angle between two axes (headings modulo π) into [-π/2, π/2).
+
+    A Python float comes back as a float (the same value, without numpy's per-call cost).
+    """
+    if isinstance(angle, float):
+        return (angle + _HALF_PI) % math.pi - _HALF_PI
     return (np.asarray(angle) + np.pi / 2) % np.pi - np.pi / 2
 
 
@@ -213,29 +233,34 @@ def solution_costs(
 
 
 def scale_covariance(cov6: np.ndarray, size: float) -> np.ndarray:
-    """:func:`pose_covariance` of a unit gate -> that of a gate of side ``size`` (same image)."""
+    """:func:`pose_covariance` (..., 6, 6) of a unit gate -> that of a gate of side ``size``."""
     d = np.array([size, size, size, 1.0, 1.0, 1.0])
     return cov6 * d[:, None] * d[None, :]
 
 
 def measurement_covariance(
-    cov6: np.ndarray, distance: float, r_world_cam: np.ndarray, cfg: MeasurementConfig
+    cov6: np.ndarray,
+    distance: np.ndarray | float,
+    r_world_cam: np.ndarray,
+    cfg: MeasurementConfig,
 ) -> np.ndarray:
-    """(4, 4) covariance of a world-frame (position, heading) measurement.
+    """(..., 4, 4) covariance of world-frame (position, heading) measurements.
 
     Args:
-        cov6: (6, 6) :func:`pose_covariance` of the solution (before ``cfg.cov_scale``).
-        distance: camera to gate centre, m (lever arm of the odometry's attitude error).
+        cov6: (..., 6, 6) :func:`pose_covariance` of the solutions (before ``cfg.cov_scale``).
+        distance: (...) camera to gate centre, m (lever arm of the odometry's attitude error).
         r_world_cam: (3, 3) camera attitude from odometry (and the mount).
     """
     cov6 = cov6 * cfg.cov_scale
     att = math.radians(cfg.odometry_att_sigma_deg)
-    cov = np.empty((4, 4))
-    cov[:3, :3] = r_world_cam @ cov6[:3, :3] @ r_world_cam.T
-    cov[:3, :3] += ((att * distance) ** 2 + cfg.min_sigma_m**2) * _EYE3
+    floor = (att * np.asarray(distance)) ** 2 + cfg.min_sigma_m**2
     up_cam = r_world_cam[2]  # world z in camera axes
-    cov[:3, 3] = cov[3, :3] = r_world_cam @ (cov6[:3, 3:] @ up_cam)
-    cov[3, 3] = float(up_cam @ cov6[3:, 3:] @ up_cam) + att**2
+    cov = np.empty((*cov6.shape[:-2], 4, 4))
+    cov[..., :3, :3] = r_world_cam @ cov6[..., :3, :3] @ r_world_cam.T
+    cov[..., :3, :3] += floor[..., None, None] * _EYE3
+    cross = (cov6[..., :3, 3:] @ up_cam) @ r_world_cam.T  # R (C_tθ up), as rows
+    cov[..., :3, 3] = cov[..., 3, :3] = cross
+    cov[..., 3, 3] = (cov6[..., 3:, 3:] @ up_cam) @ up_cam + att**2
     return cov
 
 
@@ -275,6 +300,6 @@ def measure_candidates(
     if not sols:
         return [], np.zeros(0)
     costs = solution_costs(sols, r_world_cam, cfg)
-    order = np.argsort(costs)
-    keep = [i for i in order if costs[i] - costs[order[0]] <= cfg.ambiguity_gap]
+    order, c = np.argsort(costs).tolist(), costs.tolist()
+    keep = [i for i in order if c[i] - c[order[0]] <= cfg.ambiguity_gap]
     return [sols[i] for i in keep], costs[keep]

@@ -130,3 +130,28 @@ def test_ambiguity_resolved_for_oblique_views(yaw_deg):
 )
 def test_corner_checks(corners, reason):
     assert check_corners(np.array(corners, float), 320, 240, CFG) == reason
+
+
+def test_wrap_axis_same_for_floats_and_arrays():
+    rng = np.random.default_rng(3)
+    angles = np.r_[rng.uniform(-20.0, 20.0, 500), np.arange(-8, 9) * (np.pi / 2)]
+    wrapped = wrap_axis(angles)
+    assert np.all((wrapped >= -np.pi / 2) & (wrapped < np.pi / 2))
+    for a, w in zip(angles.tolist(), wrapped.tolist(), strict=True):
+        assert wrap_axis(a) == w and isinstance(wrap_axis(a), float)
+
+
+def test_pose_covariance_batched_equals_one_at_a_time():
+    rng = np.random.default_rng(4)
+    od = odom_at(0.0, [0.0, 0.0, 2.0])
+    sols = [
+        solve_square_pnp(_project(_sample_view(rng, d, 50.0), od), 1.0, CAM.K)[0]
+        for d in (2.0, 5.0, 9.0)
+    ]
+    r = np.array([s.r_cam_gate for s in sols])
+    t = np.array([s.t_cam_gate for s in sols])
+    batch = pose_covariance(CAM.K, r, t, 1.5, 2.0)
+    assert batch.shape == (3, 6, 6)
+    for cov, s in zip(batch, sols, strict=True):
+        one = pose_covariance(CAM.K, s.r_cam_gate, s.t_cam_gate, 1.5, 2.0)
+        np.testing.assert_allclose(cov, one, rtol=1e-12, atol=1e-15)

@@ -1,0 +1,216 @@
+"""One camera frame: detections -> world-frame gate measurements -> the gate track each one fits.
+
+Each detection is checked and solved by square PnP on its own (:mod:`.pnp`, one OpenCV call each);
+from there the frame is handled as arrays: the pose covariances of all its detections at once, their
+world-frame measurements for each gate size, and the Mahalanobis distances of every PnP solution to
+every gate track of that size. A detection has up to two PnP solutions, held in two slots; where the
+second is missing its slot repeats the first with an infinite cost, so that it is never chosen.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from icarus_vision.estimator.config import EstimatorConfig, MeasurementConfig
+from icarus_vision.estimator.filter import GateTrack, batch_mahalanobis_sq, heading_spread
+from icarus_vision.estimator.pnp import (
+    GateMeasurement,
+    check_corners,
+    measure_candidates,
+    measurement_covariance,
+    pose_covariance,
+    scale_covariance,
+)
+from icarus_vision.gate_detect.base import GateDetection
+
+
+@dataclass(frozen=True)
+class FrameSolutions:
+    """The PnP solutions of a frame's D usable detections, for a gate of unit size, best first.
+
+    Attributes:
+        r_cam_gate: (D, 2, 3, 3) gate axes in the camera optical frame, per solution slot.
+        t_cam_gate: (D, 2, 3) gate centre in the camera optical frame, m.
+        costs: (D, 2) ambiguity costs (:func:`.pnp.solution_costs`), inf in a missing second slot.
+        two: (D,) whether the second slot holds a solution.
+        cov6: (D, 6, 6) :func:`.pnp.pose_covariance` of the best solutions.
+        distance: (D,) camera to the best solution's gate centre, m.
+    """
+
+    r_cam_gate: np.ndarray
+    t_cam_gate: np.ndarray
+    costs: np.ndarray
+    two: np.ndarray
+    cov6: np.ndarray
+    distance: np.ndarray
+
+
+@dataclass(frozen=True)
+class FrameMeasurements:
+    """The solutions of a frame scaled to gates of one size, in the odometry world frame.
+
+    Attributes:
+        z: (D, 2, 4) gate centre (m) and heading (rad) of each solution slot.
+        cov: (D, 4, 4) their covariance (both slots share the best solution's).
+        distance: (D, 2) camera to gate centre, m.
+    """
+
+    z: np.ndarray
+    cov: np.ndarray
+    distance: np.ndarray
+
+
+def solve_detections(
+    detections: list[GateDetection],
+    k: np.ndarray,
+    image_size: tuple[int, int],
+    r_world_cam: np.ndarray,
+    t_world_cam: np.ndarray,
+    cfg: MeasurementConfig,
+    range_size: float,
+) -> tuple[FrameSolutions | None, list[str | None]]:
+    """Check and solve every detection of a frame.
+
+    Args:
+        k: (3, 3) camera intrinsics; image_size: width and height, pixels.
+        r_world_cam: (3, 3), t_world_cam: (3,) camera pose from odometry (and the mount).
+        range_size: gate size assumed for the range check, m.
+
+    Returns:
+        the solutions of the usable detections (None when there are none), and for each detection
+        why it was rejected (one of :data:`.pnp.REJECT_REASONS`) or None when it was solved.
+    """
+    width, height = image_size
+    reasons: list[str | None] = []
+    slots, costs, distance = [], [], []
+    for det in detections:
+        reason = check_corners(det.corners, width, height, cfg)
+        if reason is None:
+            sols, c = measure_candidates(det.corners, 1.0, k, r_world_cam, t_world_cam, cfg)
+            if not sols:
+                reason = "pnp_failed"
+            else:
+                t0 = sols[0].t_cam_gate
+                dist = math.sqrt(float(t0 @ t0))
+                if dist * range_size > cfg.max_range_m:
+                    reason = "range"
+        reasons.append(reason)
+        if reason is None:
+            slots.append((sols[0], sols[-1]))
+            costs.append((c[0], c[1] if len(c) == 2 else math.inf))
+            distance.append(dist)
+    if not slots:
+        return None, reasons
+    r = np.array([(a.r_cam_gate, b.r_cam_gate) for a, b in slots])
+    t = np.array([(a.t_cam_gate, b.t_cam_gate) for a, b in slots])
+    cov6 = pose_covariance(k, r[:, 0], t[:, 0], 1.0, cfg.pixel_sigma)
+    costs_arr = np.array(costs)
+    frame = FrameSolutions(r, t, costs_arr, np.isfinite(costs_arr[:, 1]), cov6, np.array(distance))
+    return frame, reasons
+
+
+def measure_frame(
+    sol: FrameSolutions,
+    size: float,
+    r_world_cam: np.ndarray,
+    t_world_cam: np.ndarray,
+    cfg: MeasurementConfig,
+) -> FrameMeasurements:
+    """World-frame measurements of a frame's solutions scaled to a gate of ``size``."""
+    cov6 = scale_covariance(sol.cov6, size)
+    cov = measurement_covariance(cov6, size * sol.distance, r_world_cam, cfg)
+    t = sol.t_cam_gate * size
+    z = np.empty((*sol.costs.shape, 4))
+    z[..., :3] = t @ r_world_cam.T + t_world_cam
+    x_axis = sol.r_cam_gate[..., 0] @ r_world_cam.T  # the gates' x axes, world frame
+    z[..., 3] = np.arctan2(x_axis[..., 1], x_axis[..., 0])
+    return FrameMeasurements(z, cov, np.sqrt(np.sum(t * t, axis=-1)))
+
+
+def _best_tracks(
+    m: FrameMeasurements, gaps: np.ndarray, means: np.ndarray, covs: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Each detection's best (solution slot, gate) pair: the lowest d² + cost gap.
+
+    Args:
+        gaps: (D, 2) each slot's cost minus the best slot's.
+        means: (M, 4), covs: (M, 4, 4) gate tracks (of the measurements' size).
+
+    Returns:
+        (D,) arrays: the score, its d², the gate (index into ``means``), the slot, and the other
+        slot's score at that gate minus the best one's.
+    """
+    d2 = batch_mahalanobis_sq(means, covs, m.z, m.cov)  # (D, 2, M)
+    score = (d2 + gaps[..., None]).reshape(len(d2), -1)  # slot-major, as (slot, gate) pairs
+    best = score.argmin(axis=1)
+    rows = np.arange(len(d2))
+    other = (best + len(means)) % score.shape[1]  # the other slot, same gate
+    slot, gate = np.divmod(best, len(means))
+    top = score[rows, best]
+    return top, d2.reshape(len(d2), -1)[rows, best], gate, slot, score[rows, other] - top
+
+
+def _measurement(
+    sol: FrameSolutions, m: FrameMeasurements, d: int, slot: int, gap: float
+) -> GateMeasurement:
+    """Detection ``d``'s solution ``slot`` as a measurement, its heading variance widened by the
+    other solution (``gap``: the other's score minus this one's; :func:`.filter.heading_spread`)."""
+    yaws, cov = m.z[d, :, 3].tolist(), m.cov[d].copy()
+    if sol.two[d]:
+        cov[3, 3] += heading_spread(yaws[slot], yaws[1 - slot], gap)
+    distance, cost = float(m.distance[d, slot]), float(sol.costs[d, slot])
+    return GateMeasurement(m.z[d, slot, :3].copy(), yaws[slot], cov, distance, cost)
+
+
+def match_detections(
+    sol: FrameSolutions,
+    tracks: list[GateTrack],
+    new_size: float,
+    r_world_cam: np.ndarray,
+    t_world_cam: np.ndarray,
+    cfg: EstimatorConfig,
+) -> tuple[list[tuple[float, int, GateMeasurement]], list[GateMeasurement]]:
+    """Associate each solved detection with the gate track that explains it best.
+
+    Both PnP solutions are tried against every track of each gate size (Mahalanobis distance plus
+    the solution's cost gap); a detection within the χ² gate of its best track is matched to it.
+
+    Args:
+        new_size: gate size of a measurement that fits no track, m.
+
+    Returns:
+        (score, track index, measurement) of each matched detection, and the measurements of the
+        unmatched ones (for a gate of ``new_size``), both in detection order.
+    """
+    gaps = sol.costs - sol.costs[:, :1]
+    means = np.array([tr.mean for tr in tracks]).reshape(-1, 4)
+    covs = np.array([tr.cov for tr in tracks]).reshape(-1, 4, 4)
+    track_size = np.array([tr.size for tr in tracks])
+    measured: dict[float, FrameMeasurements] = {}
+    groups = []  # per gate size: its measurements and _best_tracks' results as lists
+    for size in sorted(set(track_size.tolist())):
+        idx = np.flatnonzero(track_size == size)
+        m = measured[size] = measure_frame(sol, size, r_world_cam, t_world_cam, cfg.measurement)
+        score, d2, gate, slot, alt = _best_tracks(m, gaps, means[idx], covs[idx])
+        track = idx[gate]  # index into ``tracks``
+        groups.append((m, *(a.tolist() for a in (score, d2, track, slot, alt))))
+    pairs, unmatched = [], []
+    for d in range(len(gaps)):
+        best = None  # the size whose best track scores lowest (the smallest size on ties)
+        for g in groups:
+            if best is None or g[1][d] < best[1][d]:
+                best = g
+        if best is not None:
+            m, score, d2, track, slot, alt = best
+            if d2[d] <= cfg.filter.gate_chi2:
+                pairs.append((score[d], track[d], _measurement(sol, m, d, slot[d], alt[d])))
+                continue
+        if new_size not in measured:
+            measured[new_size] = measure_frame(
+                sol, new_size, r_world_cam, t_world_cam, cfg.measurement
+            )
+        unmatched.append(_measurement(sol, measured[new_size], d, 0, float(gaps[d, 1])))
+    return pairs, unmatched

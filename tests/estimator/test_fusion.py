@@ -1,0 +1,93 @@
+"""One frame's detections solved and associated at once: the batched maths against one at a time."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from icarus_vision.estimator.config import EstimatorConfig, MeasurementConfig
+from icarus_vision.estimator.filter import GateTrack
+from icarus_vision.estimator.fusion import match_detections, measure_frame, solve_detections
+from icarus_vision.estimator.pnp import (
+    measure_candidates,
+    measurement_covariance,
+    pose_covariance,
+    scale_covariance,
+    to_measurement,
+)
+from icarus_vision.gate_detect import GateDetection, OracleDetector
+from icarus_vision.sim.track import Gate, Track
+
+from .conftest import CAM, odom_at
+
+CFG = MeasurementConfig(pixel_sigma=2.0)
+SIZE = (CAM.width, CAM.height)
+
+
+def _view():
+    """Three gates ahead of a drone at (0, 0, 2), their oracle detections and the camera pose."""
+    track = Track(
+        "three",
+        (Gate((5.0, -1.0, 2.0), yaw_deg=20.0), Gate((8.0, 1.5, 2.3)), Gate((12.0, 0.0, 1.8))),
+    )
+    od = odom_at(0.0, [0.0, 0.0, 2.0])
+    dets = OracleDetector(track, CAM, sigma_px=1.0, seed=3).detect_pose(od.pos, od.quat)
+    r_wc, t_wc = CAM.pose(od.pos, od.quat)
+    return track, dets, r_wc, t_wc
+
+
+def test_batched_measurements_equal_one_detection_at_a_time():
+    _, dets, r_wc, t_wc = _view()
+    assert len(dets) == 3
+    sols, reasons = solve_detections(dets, CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+    assert reasons == [None, None, None]
+    m = measure_frame(sols, 1.4, r_wc, t_wc, CFG)
+    for d, det in enumerate(dets):
+        one, costs = measure_candidates(det.corners, 1.0, CAM.K, r_wc, t_wc, CFG)
+        best = one[0]
+        cov6 = pose_covariance(CAM.K, best.r_cam_gate, best.t_cam_gate, 1.0, CFG.pixel_sigma)
+        np.testing.assert_allclose(sols.cov6[d], cov6, rtol=1e-12, atol=1e-15)
+        dist = 1.4 * math.sqrt(float(best.t_cam_gate @ best.t_cam_gate))
+        cov = measurement_covariance(scale_covariance(cov6, 1.4), dist, r_wc, CFG)
+        np.testing.assert_allclose(m.cov[d], cov, rtol=1e-12, atol=1e-15)
+        assert sols.two[d] == (len(one) == 2)
+        for slot, sol in enumerate(one):
+            np.testing.assert_allclose(sols.costs[d, slot], costs[slot])
+            scaled = type(sol)(sol.r_cam_gate, sol.t_cam_gate * 1.4, sol.sq_err)
+            want = to_measurement(scaled, cov, r_wc, t_wc)
+            np.testing.assert_allclose(m.z[d, slot, :3], want.pos, rtol=1e-12)
+            assert abs(m.z[d, slot, 3] - want.yaw) < 1e-12
+        if len(one) == 1:
+            assert sols.costs[d, 1] == math.inf
+
+
+def test_rejections_are_reported_per_detection():
+    _, dets, r_wc, t_wc = _view()
+    bad = GateDetection([[10, 10], [50, 10], [90, 10], [130, 10]], np.ones(4), 1.0)
+    far = GateDetection([[100, 100], [104, 100], [104, 104], [100, 104]], np.ones(4), 1.0)
+    sols, reasons = solve_detections([bad, dets[0], far], CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+    assert reasons == ["degenerate", None, "range"]
+    assert sols.costs.shape == (1, 2) and sols.cov6.shape == (1, 6, 6)
+    assert solve_detections([bad], CAM.K, SIZE, r_wc, t_wc, CFG, 1.0) == (None, ["degenerate"])
+
+
+def test_each_detection_is_matched_to_its_gate():
+    track, dets, r_wc, t_wc = _view()
+    cov = np.diag([0.3**2] * 3 + [math.radians(10.0) ** 2])
+    # The gates in the reverse order, and a fourth gate nobody sees.
+    gates = [*track.gates[::-1], Gate((6.0, 4.0, 2.0))]
+    tracks = [GateTrack(np.array(g.pos) + 0.1, g.yaw, cov, g.size, 0.0, True) for g in gates]
+    cfg = EstimatorConfig(measurement=CFG)
+    sols, _ = solve_detections(dets, CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+    pairs, unmatched = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
+    assert [ti for _, ti, _ in pairs] == [2, 1, 0] and not unmatched
+    for (score, _, m), gate in zip(pairs, track.gates, strict=True):
+        assert 0.0 <= score < cfg.filter.gate_chi2
+        err = m.pos - np.array(gate.pos)
+        assert err @ np.linalg.solve(m.cov[:3, :3], err) < 16.3  # χ²(3), 99.9 %
+    # With the gates' tracks moved away, every detection becomes an unmatched measurement.
+    for tr in tracks:
+        tr.mean[:3] += 3.0
+    pairs, unmatched = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
+    assert not pairs and len(unmatched) == 3
