@@ -6,7 +6,8 @@ Usage: ``.venv/bin/python benchmarks/estimator.py [--detector oracle|cnn|opencv]
 Error: the scripted pilot flies ``ten-gates`` in PyBullet on the estimate (closed loop), the camera
 renders at its rate (30 Hz) and the detector runs on it: ``cnn`` is the shipped network, with the
 estimator set up for it by ``config_for_detector``; ``oracle`` reports the projected true corners of
-the gates visible in the segmentation mask with Gaussian pixel noise (σ = ``--pixel-noise``). Odometry has its default noise and drift, and the prior map is displaced by 0.3 m (σ).
+the gates visible in the segmentation mask with Gaussian pixel noise (σ = ``--pixel-noise``).
+Odometry has its default noise and drift, and the prior map is displaced by 0.3 m (σ).
 Figures: median and 95th percentile of the relative-position error, over all camera frames and
 within 5 m of the gate, per seed, their means, and how many seeds meet the issue's targets.
 
