@@ -247,11 +247,13 @@ def measurement_covariance(
     """(..., 4, 4) covariance of world-frame (position, heading) measurements.
 
     Args:
-        cov6: (..., 6, 6) :func:`pose_covariance` of the solutions (before ``cfg.cov_scale``).
+        cov6: (..., 6, 6) :func:`pose_covariance` of the solutions (before ``cfg.cov_scale`` and
+            the range inflation ``1 + (distance / cfg.range_inflation_m)²``).
         distance: (...) camera to gate centre, m (lever arm of the odometry's attitude error).
         r_world_cam: (3, 3) camera attitude from odometry (and the mount).
     """
-    cov6 = cov6 * cfg.cov_scale
+    scale = cfg.cov_scale * (1.0 + (np.asarray(distance) / cfg.range_inflation_m) ** 2)
+    cov6 = cov6 * scale[..., None, None]
     att = math.radians(cfg.odometry_att_sigma_deg)
     floor = (att * np.asarray(distance)) ** 2 + cfg.min_sigma_m**2
     up_cam = r_world_cam[2]  # world z in camera axes

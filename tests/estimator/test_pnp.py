@@ -155,3 +155,19 @@ def test_pose_covariance_batched_equals_one_at_a_time():
     for cov, s in zip(batch, sols, strict=True):
         one = pose_covariance(CAM.K, s.r_cam_gate, s.t_cam_gate, 1.5, 2.0)
         np.testing.assert_allclose(cov, one, rtol=1e-12, atol=1e-15)
+
+
+def test_range_inflation_doubles_the_covariance_at_its_distance():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(6, 6))
+    cov6 = a @ a.T + np.eye(6)
+    r = np.eye(3)
+    off = MeasurementConfig(odometry_att_sigma_deg=0.0, min_sigma_m=0.0)
+    on = MeasurementConfig(odometry_att_sigma_deg=0.0, min_sigma_m=0.0, range_inflation_m=10.0)
+    base = measurement_covariance(cov6, 10.0, r, off)
+    np.testing.assert_allclose(measurement_covariance(cov6, 10.0, r, on), 2.0 * base)
+    np.testing.assert_allclose(measurement_covariance(cov6, 0.0, r, on), base)
+    batched = measurement_covariance(np.stack([cov6, cov6]), np.array([0.0, 10.0]), r, on)
+    np.testing.assert_allclose(batched[1], 2.0 * base)
+    with pytest.raises(ValueError, match="range_inflation_m"):
+        MeasurementConfig(range_inflation_m=0.0)
