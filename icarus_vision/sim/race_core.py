@@ -12,66 +12,18 @@ from dataclasses import replace
 import numpy as np
 
 from icarus_vision.sim import rules
+from icarus_vision.sim.action import validate_action
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
-from icarus_vision.sim.dynamics import (
-    QuadBatchParams,
-    QuadState,
-    quat_to_rot,
-    quat_to_rpy,
-    rpy_to_quat,
-)
+from icarus_vision.sim.dynamics import QuadBatchParams, QuadState, quat_to_rpy, rpy_to_quat
+from icarus_vision.sim.observation import OBS_DIM, observation_vector
 from icarus_vision.sim.random_track import random_track
+from icarus_vision.sim.randomization import jitter_track, sample_wind
 from icarus_vision.sim.reward import compute_reward
-from icarus_vision.sim.track import SAME_GATE_TOL, Gate, Track
+from icarus_vision.sim.track import Track
 
-OBS_DIM = 15
 TAKEOFF_CLEARANCE = 0.1  # m above the ground (sphere bottom) that counts as airborne
 RANDOM_TRACK_GATES = 10
-GUST_FREQ_HZ = (0.1, 1.0)
-
-
-def validate_action(action, n: int) -> np.ndarray:
-    """Check and clip actions.
-
-    Args:
-        action: array-like (n, 4) (or (4,) when n == 1) in [-1, 1].
-
-    Returns:
-        (n, 4) float64 clipped to [-1, 1].
-
-    Raises:
-        ValueError: wrong shape, or NaN / inf entries.
-    """
-    a = np.asarray(action, dtype=np.float64)
-    if n == 1 and a.shape == (4,):
-        a = a[None]
-    if a.shape != (n, 4):
-        want = "(4,)" if n == 1 else f"({n}, 4)"
-        raise ValueError(
-            f"action must have shape {want} [thrust, roll_rate, pitch_rate, yaw_rate], got {a.shape}"
-        )
-    if not np.all(np.isfinite(a)):
-        raise ValueError(
-            f"action contains NaN or inf: {a[~np.isfinite(a).all(axis=1)][0].tolist()}"
-        )
-    return np.clip(a, -1.0, 1.0)
-
-
-def jitter_track(track: Track, rng: np.random.Generator, pos_m: float, yaw_deg: float) -> Track:
-    """Move each physical gate by a random offset (a gate flown twice moves once); z stays >= 0.8 m."""
-    pos = np.array([g.pos for g in track.gates])
-    close = np.linalg.norm(pos[:, None] - pos[None], axis=2) < SAME_GATE_TOL
-    group = close.argmax(axis=1)  # index of the first entry of each physical gate
-    dp = rng.uniform(-pos_m, pos_m, (len(pos), 3))[group]
-    dyaw = rng.uniform(-yaw_deg, yaw_deg, len(pos))[group]
-    new = pos + dp
-    new[:, 2] = np.maximum(new[:, 2], 0.8)
-    gates = tuple(
-        Gate((float(p[0]), float(p[1]), float(p[2])), g.yaw_deg + float(dy), g.size, g.frame_width)
-        for g, p, dy in zip(track.gates, new, dyaw, strict=True)
-    )
-    return replace(track, gates=gates, bounds_min=None, bounds_max=None)
 
 
 class RaceCore:
@@ -199,13 +151,8 @@ class RaceCore:
             if r.enabled:
                 mass *= rng.uniform(1 - r.mass_pct, 1 + r.mass_pct)
                 thrust_max *= rng.uniform(1 - r.thrust_pct, 1 + r.thrust_pct)
-                ang = rng.uniform(0, 2 * math.pi)
-                self.wind_const[i] = rng.uniform(0, r.wind_mps) * np.array(
-                    [math.cos(ang), math.sin(ang), 0.0]
-                )
-                self.gust_amp[i] = rng.uniform(0, r.gust_mps, (3, 3)) / 3.0
-                self.gust_freq[i] = rng.uniform(*GUST_FREQ_HZ, (3, 3))
-                self.gust_phase[i] = rng.uniform(0, 2 * math.pi, (3, 3))
+                wind = sample_wind(rng, r.wind_mps, r.gust_mps)
+                self.wind_const[i], self.gust_amp[i], self.gust_freq[i], self.gust_phase[i] = wind
                 if r.start_pos_jitter_m > 0:
                     start[:2] += rng.uniform(-r.start_pos_jitter_m, r.start_pos_jitter_m, 2)
             self.params.mass[i], self.params.thrust_max[i] = mass, thrust_max
@@ -246,23 +193,17 @@ class RaceCore:
         A broad phase keeps only (drone, gate) pairs whose centres are within reach of each other
         at the end of the step; the exact bar distance is computed for those pairs alone.
         """
-        end = trail[-1]
-        diff = self.g_pos - end[:, None, :]
-        travel = np.abs(trail[-1] - trail[0]).sum(axis=1)
-        reach = self.g_reach + (self.params.radius + travel)[:, None]
-        near = (np.einsum("ngi,ngi->ng", diff, diff) < reach * reach) & self.g_mask
-        ni, gi = np.nonzero(near)
-        hit = np.zeros(self.n, dtype=bool)
-        if ni.size == 0:
-            return hit
-        d = trail[:, ni, :] - self.g_pos[ni, gi]
-        c, s = self.g_cos[ni, gi], self.g_sin[ni, gi]
-        local = np.stack(
-            (c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]), axis=-1
+        return rules.trail_frame_collision(
+            trail,
+            self.params.radius,
+            self.g_pos,
+            self.g_cos,
+            self.g_sin,
+            self.g_size,
+            self.g_fw,
+            self.g_reach,
+            self.g_mask,
         )
-        dist_sq = rules.bar_distance_sq_local(local, self.g_size[ni, gi], self.g_fw[ni, gi])
-        hit[ni[(dist_sq < self.params.radius**2).any(axis=0)]] = True
-        return hit
 
     def finish_step(
         self,
@@ -330,17 +271,11 @@ class RaceCore:
         """
         rpy = quat_to_rpy(state.quat) if rpy is None else rpy
         gpos, gyaw, _ = self.target_gate()
-        parts = [gpos - state.pos]
+        nxt = None
         if self.cfg.observation == "extended":
             j = np.minimum(self.target + 1, self.n_pass - 1)
-            normal = np.stack((np.cos(gyaw), np.sin(gyaw), np.zeros_like(gyaw)), axis=1)
-            parts += [normal, self.g_pos[np.arange(self.n), j] - state.pos]
-        if self.cfg.gate_obs_frame == "body":
-            rot = quat_to_rot(state.quat)
-            parts = [np.einsum("nji,nj->ni", rot, v) for v in parts]
-        return np.concatenate((state.pos, state.vel, rpy, state.omega, *parts), axis=1).astype(
-            np.float32
-        )
+            nxt = self.g_pos[np.arange(self.n), j]
+        return observation_vector(state, rpy, gpos, gyaw, nxt, self.cfg.gate_obs_frame)
 
     def info(self, i: int, terms: dict, crash_code: int) -> dict:
         """The info dict of drone ``i`` for the step just taken."""

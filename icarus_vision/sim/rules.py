@@ -96,6 +96,53 @@ def frame_collision(points, radius, gate_pos, gate_yaw, size, frame_width, gate_
     return hit.any(axis=1)
 
 
+def trail_frame_collision(
+    trail: np.ndarray,
+    radius: float | np.ndarray,
+    gate_pos: np.ndarray,
+    gate_cos: np.ndarray,
+    gate_sin: np.ndarray,
+    size: np.ndarray,
+    frame_width: np.ndarray,
+    reach: np.ndarray,
+    gate_mask: np.ndarray,
+) -> np.ndarray:
+    """(N,) bool: any sub-step position (trail (S, N, 3)) within the drone radius of a bar.
+
+    A broad phase keeps only (drone, gate) pairs whose centres are within reach of each other
+    at the end of the step; the exact bar distance is computed for those pairs alone.
+
+    Args:
+        trail: (S, N, 3) world sub-step positions.
+        radius: scalar or (N,) drone sphere radius, metres.
+        gate_pos: (N, G, 3) gate centres, world.
+        gate_cos, gate_sin: (N, G) cosine and sine of the gate headings.
+        size, frame_width: (N, G) inner opening and bar width, metres.
+        reach: (N, G) centre-to-outer-corner distance of each gate, metres.
+        gate_mask: (N, G) bool, True for gates that exist.
+
+    Returns:
+        (N,) bool.
+    """
+    end = trail[-1]
+    diff = gate_pos - end[:, None, :]
+    travel = np.abs(trail[-1] - trail[0]).sum(axis=1)
+    reach = reach + (radius + travel)[:, None]
+    near = (np.einsum("ngi,ngi->ng", diff, diff) < reach * reach) & gate_mask
+    ni, gi = np.nonzero(near)
+    hit = np.zeros(len(end), dtype=bool)
+    if ni.size == 0:
+        return hit
+    d = trail[:, ni, :] - gate_pos[ni, gi]
+    c, s = gate_cos[ni, gi], gate_sin[ni, gi]
+    local = np.stack(
+        (c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]), axis=-1
+    )
+    dist_sq = bar_distance_sq_local(local, size[ni, gi], frame_width[ni, gi])
+    hit[ni[(dist_sq < radius**2).any(axis=0)]] = True
+    return hit
+
+
 def gate_passage(p0: np.ndarray, p1: np.ndarray, gate_pos, gate_yaw, size) -> np.ndarray:
     """Whether each drone's segment p0 -> p1 passes its target gate.
 
