@@ -199,7 +199,7 @@ class GateEstimator:
 
     def _select_target(self, odom: OdometryReading) -> None:
         """Map-free: the nearest confirmed gate ahead that has not been passed (sticky)."""
-        fwd = quat_to_rot(odom.quat[None])[0][:, 0]
+        fwd = self._r_wb[:, 0]
         fwd = np.array([fwd[0], fwd[1], 0.0]) / max(math.hypot(fwd[0], fwd[1]), 1e-9)
         best, best_d = -1, math.inf
         pool = [i for i, tr in enumerate(self.tracks) if tr.hits >= self.config.filter.confirm_hits]

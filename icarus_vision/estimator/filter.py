@@ -8,7 +8,6 @@ same from both sides), so its innovation is wrapped modulo π.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -95,17 +94,6 @@ def heading_spread(yaw: float, alt_yaw: float, gap: float) -> float:
     dyaw = wrap_axis(float(alt_yaw - yaw))
     spread = w * dyaw * dyaw
     return 0.0 if spread < 1e-8 else spread
-
-
-def widen_heading(m: GateMeasurement, alt: GateMeasurement, gap: float) -> GateMeasurement:
-    """Account for the other PnP solution in a measurement's heading variance
-    (:func:`heading_spread`)."""
-    spread = heading_spread(m.yaw, alt.yaw, gap)
-    if spread == 0.0:
-        return m
-    cov = m.cov.copy()
-    cov[3, 3] += spread
-    return replace(m, cov=cov)
 
 
 class GateTrack:

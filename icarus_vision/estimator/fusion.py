@@ -23,6 +23,7 @@ from icarus_vision.estimator.pnp import (
     measurement_covariance,
     pose_covariance,
     scale_covariance,
+    world_pose,
 )
 from icarus_vision.gate_detect.base import GateDetection
 
@@ -123,10 +124,8 @@ def measure_frame(
     cov6 = scale_covariance(sol.cov6, size)
     cov = measurement_covariance(cov6, size * sol.distance, r_world_cam, cfg)
     t = sol.t_cam_gate * size
-    z = np.empty((*sol.costs.shape, 4))
-    z[..., :3] = t @ r_world_cam.T + t_world_cam
-    x_axis = sol.r_cam_gate[..., 0] @ r_world_cam.T  # the gates' x axes, world frame
-    z[..., 3] = np.arctan2(x_axis[..., 1], x_axis[..., 0])
+    pos, yaw = world_pose(sol.r_cam_gate, t, r_world_cam, t_world_cam)
+    z = np.concatenate([pos, yaw[..., None]], axis=-1)
     return FrameMeasurements(z, cov, np.sqrt(np.sum(t * t, axis=-1)))
 
 

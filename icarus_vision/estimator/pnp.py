@@ -266,6 +266,26 @@ def measurement_covariance(
     return cov
 
 
+def world_pose(
+    r_cam_gate: np.ndarray,
+    t_cam_gate: np.ndarray,
+    r_world_cam: np.ndarray,
+    t_world_cam: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-frame gate poses in the odometry world frame.
+
+    Args:
+        r_cam_gate: (..., 3, 3) gate axes, t_cam_gate: (..., 3) gate centres, camera frame.
+        r_world_cam: (3, 3), t_world_cam: (3,) camera pose from odometry (and the mount).
+
+    Returns:
+        (..., 3) gate centres (m) and (...) headings of the gates' x axes about world z (rad).
+    """
+    pos = t_cam_gate @ r_world_cam.T + t_world_cam
+    x_axis = r_cam_gate[..., 0] @ r_world_cam.T  # the gates' x axes, world frame
+    return pos, np.arctan2(x_axis[..., 1], x_axis[..., 0])
+
+
 def to_measurement(
     sol: PnPSolution,
     cov: np.ndarray,
@@ -281,9 +301,8 @@ def to_measurement(
         r_world_cam: (3, 3), t_world_cam: (3,) camera pose from odometry (and the mount).
     """
     dist = math.sqrt(float(sol.t_cam_gate @ sol.t_cam_gate))
-    r_wg = r_world_cam @ sol.r_cam_gate
-    pos = t_world_cam + r_world_cam @ sol.t_cam_gate
-    return GateMeasurement(pos, gate_yaw(r_wg), cov, dist, cost)
+    pos, yaw = world_pose(sol.r_cam_gate, sol.t_cam_gate, r_world_cam, t_world_cam)
+    return GateMeasurement(pos, float(yaw), cov, dist, cost)
 
 
 def measure_candidates(

@@ -7,8 +7,13 @@ import math
 import numpy as np
 
 from icarus_vision.estimator.config import EstimatorConfig, MeasurementConfig
-from icarus_vision.estimator.filter import GateTrack
-from icarus_vision.estimator.fusion import match_detections, measure_frame, solve_detections
+from icarus_vision.estimator.filter import GateTrack, heading_spread
+from icarus_vision.estimator.fusion import (
+    _measurement,
+    match_detections,
+    measure_frame,
+    solve_detections,
+)
 from icarus_vision.estimator.pnp import (
     measure_candidates,
     measurement_covariance,
@@ -91,3 +96,17 @@ def test_each_detection_is_matched_to_its_gate():
         tr.mean[:3] += 3.0
     pairs, unmatched = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
     assert not pairs and len(unmatched) == 3
+
+
+def test_a_plausible_second_solution_widens_only_that_measurements_heading():
+    _, dets, r_wc, t_wc = _view()
+    sols, _ = solve_detections(dets, CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+    m = measure_frame(sols, 1.0, r_wc, t_wc, CFG)
+    for d in range(len(sols.costs)):
+        shared = m.cov[d].copy()
+        got = _measurement(sols, m, d, 0, 0.0)
+        spread = heading_spread(m.z[d, 0, 3], m.z[d, 1, 3], 0.0) if sols.two[d] else 0.0
+        assert math.isclose(got.cov[3, 3], shared[3, 3] + spread, rel_tol=1e-12)
+        np.testing.assert_array_equal(got.cov[:3], shared[:3])
+        np.testing.assert_array_equal(m.cov[d], shared)  # the frame's shared covariance is intact
+    assert sols.two.any()  # the view has ambiguous detections, so the widening was exercised
