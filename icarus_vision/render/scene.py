@@ -123,24 +123,18 @@ class Scene:
 
     def _add_mesh(self, mesh: Mesh, material: Material, pos, yaw: float = 0.0) -> int:
         """A static body of a mesh made of boxes (:func:`box_corners`), which cast shadows."""
-        if self.renderer == "egl":
-            vis = p.createVisualShape(
-                p.GEOM_MESH,
-                fileName=self._obj_file(mesh),
-                meshScale=[1.0, 1.0, 1.0],
-                rgbaColor=material.rgba,
-                physicsClientId=self.client,
-            )
+        if self.renderer == "egl":  # the plugin crashes on in-memory meshes
+            geometry = {"fileName": self._obj_file(mesh), "meshScale": [1.0, 1.0, 1.0]}
         else:
-            vis = p.createVisualShape(
-                p.GEOM_MESH,
-                vertices=mesh.vertices.tolist(),
-                indices=mesh.indices.tolist(),
-                normals=mesh.normals.tolist(),
-                uvs=mesh.uvs.tolist(),
-                rgbaColor=material.rgba,
-                physicsClientId=self.client,
-            )
+            geometry = {
+                "vertices": mesh.vertices.tolist(),
+                "indices": mesh.indices.tolist(),
+                "normals": mesh.normals.tolist(),
+                "uvs": mesh.uvs.tolist(),
+            }
+        vis = p.createVisualShape(
+            p.GEOM_MESH, rgbaColor=material.rgba, physicsClientId=self.client, **geometry
+        )
         self._add_casters(box_corners(mesh), pos, yaw)
         body = p.createMultiBody(
             baseMass=0.0,
