@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/policy_targets.py single-gate [--minutes 1] [--episodes 200]
     .venv/bin/python benchmarks/policy_targets.py ten-gates [--minutes 20] [--episodes 300]
     .venv/bin/python benchmarks/policy_targets.py pybullet [--policy default] [--episodes 100] [--seeds 7 11 13]
+    .venv/bin/python benchmarks/policy_targets.py lap-times [--policy default]
     .venv/bin/python benchmarks/policy_targets.py curves RUN_DIR [RUN_DIR ...] --png docs/policy_training_curves.png
 
 ``single-gate`` trains the fast preset on the single-gate stage for a wall-clock budget, then flies
@@ -11,7 +12,9 @@ as in training) and prints the success rate. ``ten-gates`` trains through the wh
 a wall-clock budget and flies the run's best and last models on random 10-gate tracks.
 ``pybullet`` flies a policy on the PyBullet backend with ground-truth observations on random
 10-gate tracks with randomisation on, ``--episodes`` tracks per seed, and pools the seeds.
-``curves`` plots success rate and return against
+``lap-times`` flies the policy and the scripted controller, randomisation on, on 300 random
+10-gate tracks (seed 5) and 20 episodes each of ``grand-prix`` and ``ten-gates``: success rate and
+median lap time of each. ``curves`` plots success rate and return against
 wall-clock from runs' ``metrics.json`` (or ``checkpoints/last_state.json``).
 """
 
@@ -77,6 +80,22 @@ def pybullet(policy: str, episodes: int, seeds: list[int]) -> dict:
             "episodes": n, "success_rate": round(n_ok / n, 4), "crash_reasons": reasons}  # fmt: skip
 
 
+def lap_times(policy: str) -> list[dict]:
+    rows = []
+    for track, episodes, seed in ((None, 300, 5), ("grand-prix", 20, 0), ("ten-gates", 20, 0)):
+        row = {"track": track or "random-10", "episodes": episodes}
+        for name in (policy, "scripted"):
+            ev = evaluate_policy(
+                resolve_policy(name), track, episodes=episodes, randomize=True, seed=seed
+            )
+            row[name] = {
+                "success_rate": ev["success_rate"],
+                "lap_median_s": ev["lap_time_s"]["median"],
+            }
+        rows.append(row)
+    return rows
+
+
 def _metrics(run: Path) -> list[dict]:
     if (run / "metrics.json").is_file():
         return json.loads((run / "metrics.json").read_text())
@@ -97,6 +116,8 @@ def main() -> None:
     b.add_argument("--policy", default="default")
     b.add_argument("--episodes", type=int, default=100)
     b.add_argument("--seeds", type=int, nargs="+", default=[7, 11, 13])
+    lt = sub.add_parser("lap-times")
+    lt.add_argument("--policy", default="default")
     c = sub.add_parser("curves")
     c.add_argument("runs", nargs="+", type=Path)
     c.add_argument("--png", type=Path, required=True)
@@ -108,6 +129,8 @@ def main() -> None:
         print(json.dumps(ten_gates(args.minutes, args.episodes, args.out), indent=2))
     elif args.cmd == "pybullet":
         print(json.dumps(pybullet(args.policy, args.episodes, args.seeds), indent=2))
+    elif args.cmd == "lap-times":
+        print(json.dumps(lap_times(args.policy), indent=2))
     else:
         plot_training_curves({r.name: _metrics(r) for r in args.runs}, args.png, args.title)
         print(f"wrote {args.png}")
