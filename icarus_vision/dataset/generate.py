@@ -43,8 +43,9 @@ from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.render.recipe import Recipe, load_recipe
 from icarus_vision.render.scene import RENDERERS
 
-FORMAT = "icarus-vision-dataset/1"
-"""Layout version recorded in ``config.json`` and ``manifest.json``."""
+FORMAT = "icarus-vision-dataset/2"
+"""Layout version recorded in ``config.json`` and ``manifest.json`` (2: gates seen from behind are
+labelled too, so a folder of format 1 is never resumed into a mixed dataset)."""
 
 ProgressFn = Callable[[int, int], None]
 """``progress(done_images, total_images)``; the first call counts the images found complete."""

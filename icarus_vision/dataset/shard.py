@@ -92,7 +92,7 @@ def iter_samples(
             for i, image_id in enumerate(scene_ids):
                 pos, quat = poses.pos[i], poses.quat[i]
                 frame = scene.render(pos, quat, sample_lighting(recipe, rng))
-                labels = frame_labels(scene, frame, pos, quat)
+                labels = frame_labels(scene, frame, pos, quat, back_views=True)
                 rgb = apply_sensor_noise(frame.rgb, sample_sensor(recipe, rng), rng)
                 yield Sample(
                     image_id=image_id,
@@ -121,6 +121,8 @@ def annotation_dict(label: GateLabel, image_id: int) -> dict:
 
     ``keypoints`` follows COCO: (x, y, v) per corner TL, TR, BR, BL, with x = y = 0 where v = 0.
     ``corners_px`` keeps every corner's projection (None behind the camera), in or out of frame.
+    A gate seen from behind has ``passage`` None, ``from_behind`` true and its corners named as
+    seen from that side (:mod:`icarus_vision.render.labels`).
     """
     kps = []
     for (u, v), flag in zip(label.corners_px, label.visibility, strict=True):
@@ -136,6 +138,7 @@ def annotation_dict(label: GateLabel, image_id: int) -> dict:
         "iscrowd": 0,
         "gate_id": label.gate_id,
         "passage": label.passage,
+        "from_behind": label.from_behind,
         "distance": _r(label.distance, 4),
         "corners_px": [_r(c) if np.all(np.isfinite(c)) else None for c in label.corners_px],
         "pixels": label.pixels,

@@ -4,7 +4,8 @@ Matching rule: detections are taken in decreasing score; each is matched to the 
 ground-truth gate with the smallest mean distance between corresponding corners (TL-TL, TR-TR, ...),
 if that distance is at most ``max(4 px, 0.25 x the ground truth's mean side)``. One-to-one.
 
-Which gates count: a ground-truth gate counts in the figures when all four corners lie in the image,
+Which gates count: gates seen from behind are labelled like any other (the frame looks the same from
+both sides; their corners are named as seen), and a ground-truth gate counts in the figures when all four corners lie in the image,
 at least three are visible (not occluded), and its opening's mean side is at least ``min_gate_px``.
 Other labelled gates are *ignored*: missing them is no error, and a detection matched to one is
 neither a true nor a false positive; an unmatched detection smaller than ``min_gate_px`` is ignored

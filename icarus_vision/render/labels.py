@@ -3,13 +3,16 @@
 Corner order is TL, TR, BR, BL as seen by a drone approaching the gate along its passage direction
 (ARCHITECTURE.md). A physical gate flown in both directions is labelled with the passage whose
 approach side the camera is on, so the order always reads TL, TR, BR, BL on screen for a level
-camera. Visibility comes from the renderer's segmentation and depth, never from geometry alone.
+camera. A gate seen only from its exit side looks the same as from its approach side (the frame is
+symmetric); with ``back_views`` it is labelled too, its corners named as seen from that side
+(``passage`` None, ``from_behind`` True), so a detector is never taught that a gate is not a gate.
+Visibility comes from the renderer's segmentation and depth, never from geometry alone.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -27,7 +30,8 @@ class GateLabel:
 
     Attributes:
         gate_id: index of the physical gate in ``track.physical_gates()``.
-        passage: index in ``track.gates`` of the passage whose direction orders the corners.
+        passage: index in ``track.gates`` of the passage whose direction orders the corners; None
+            for a gate seen from behind (corners then named as seen from its exit side).
         corners_px: (4, 2) float64 (u, v) of the opening's corners, TL, TR, BR, BL; NaN for a corner
             behind the camera.
         visibility: (4,) int64 COCO flags: 2 visible, 1 in the image but hidden, 0 outside the image.
@@ -39,7 +43,7 @@ class GateLabel:
     """
 
     gate_id: int
-    passage: int
+    passage: int | None
     corners_px: np.ndarray
     visibility: np.ndarray
     bbox: tuple[float, float, float, float]
@@ -47,6 +51,11 @@ class GateLabel:
     r_cam_gate: np.ndarray
     t_cam_gate: np.ndarray
     pixels: int
+
+    @property
+    def from_behind(self) -> bool:
+        """The camera sees the gate from its exit side (no passage approaches from there)."""
+        return self.passage is None
 
     @property
     def num_visible(self) -> int:
@@ -121,6 +130,7 @@ def gate_labels(
     gate_bodies: tuple[int, ...],
     frame_width: float | None = None,
     physical_gates: tuple[Gate, ...] | None = None,
+    back_views: bool = False,
 ) -> list[GateLabel]:
     """Labels of every gate whose opening faces the camera, lies in front of it and shows in the image.
 
@@ -133,6 +143,7 @@ def gate_labels(
         gate_bodies: body id of each physical gate, ``track.physical_gates()`` order.
         frame_width: rendered bar width when the scene overrode it (None: each gate's own).
         physical_gates: ``track.physical_gates()`` when the caller has it already.
+        back_views: also label gates seen from behind (see the module docstring).
 
     Returns:
         labels sorted by distance, nearest first.
@@ -150,9 +161,10 @@ def gate_labels(
         if not in_view[gid]:
             continue
         passage = facing_passage(track, gate, t_wc)
-        if passage is None:
+        if passage is None and not back_views:
             continue
-        g = track.gates[passage]
+        # Seen from behind: the same frame turned about z, so corners are named from this side.
+        g = track.gates[passage] if passage is not None else _turned(gate)
         fw = frame_width or g.frame_width
         r_wg = _yaw_rot(g.yaw)
         t_cg = world_to_camera(np.asarray(g.pos)[None], r_wc, t_wc)[0]
@@ -190,6 +202,11 @@ def gate_labels(
     return labels
 
 
+def _turned(gate: Gate) -> Gate:
+    """``gate`` with its passage direction reversed (the same frame, corners named from behind)."""
+    return replace(gate, yaw_deg=gate.yaw_deg + 180.0)
+
+
 def _outer_bbox(camera, r_wc, t_wc, gate: Gate, fw: float, mask: np.ndarray):
     """COCO box of the projected outer frame clipped to the image (the mask's box where part of
     the frame is behind the camera); None when nothing of the gate falls in the image."""
@@ -211,7 +228,14 @@ def _outer_bbox(camera, r_wc, t_wc, gate: Gate, fw: float, mask: np.ndarray):
     return (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
 
 
-def frame_labels(scene, frame, pos: np.ndarray, quat: np.ndarray, camera: Camera | None = None):
+def frame_labels(
+    scene,
+    frame,
+    pos: np.ndarray,
+    quat: np.ndarray,
+    camera: Camera | None = None,
+    back_views: bool = False,
+):
     """:func:`gate_labels` of a :class:`~icarus_vision.render.scene.Frame` rendered by ``scene``."""
     cam = camera or scene.camera
     return gate_labels(
@@ -224,4 +248,5 @@ def frame_labels(scene, frame, pos: np.ndarray, quat: np.ndarray, camera: Camera
         scene.gate_bodies,
         scene.style.frame_width,
         scene.gates,
+        back_views,
     )

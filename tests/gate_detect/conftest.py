@@ -11,9 +11,9 @@ from icarus_vision.gate_detect.cnn.model import ModelConfig
 
 RECIPE = Path(__file__).resolve().parents[2] / "datasets" / "gates-v1.toml"
 TINY_MODEL = ModelConfig(
-    input_size=(80, 60), image_size=(160, 120), widths=(8, 8, 16, 16), head_width=8
+    input_size=(80, 60), image_size=(160, 120), widths=(8, 8, 16, 16), head_width=8, stem_width=0
 )
-"""A very small network for the training tests (output grid 40x30)."""
+"""A very small network for the training tests (half-resolution input, output grid 40x30)."""
 
 
 def write_recipe(path: Path) -> Path:

@@ -13,12 +13,13 @@ from icarus_vision.gate_detect.cnn import CnnDetector
 from icarus_vision.gate_detect.cnn.augment import make_augment
 from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
 from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, mirror
-from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.targets import (
     DecodeConfig,
     decode,
     detection_loss,
     encode_targets,
+    quad_iou,
 )
 from tests.gate_detect.conftest import TINY_MODEL
 
@@ -44,12 +45,40 @@ def test_encode_then_decode_recovers_two_gates():
         assert err < 1e-3
 
 
+def test_a_gate_found_twice_is_reported_once():
+    target, _ = encode_targets([(GATE_A, VIS)], 80, 60)
+    logits = _as_logits(target)
+    # A second centre peak two cells right of the first, predicting the same corners.
+    logits[0, 32, 42] = logits[0].max() - 0.1
+    logits[7:15, 32, 42] = torch.from_numpy(((GATE_A - (42, 32)) / 8.0).reshape(-1))
+    assert len(decode(logits, DecodeConfig(), (4.0, 4.0))) == 1
+    assert len(decode(logits, DecodeConfig(nms_iou=1.0), (4.0, 4.0))) == 2
+
+
+def test_quad_iou():
+    sq = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    assert quad_iou(sq, sq) == pytest.approx(1.0)
+    assert quad_iou(sq, sq + (1.0, 0.0)) == pytest.approx(2.0 / 6.0)
+    assert quad_iou(sq, sq + (5.0, 0.0)) == 0.0
+
+
+def test_stem_puts_the_output_at_input_stride_4():
+    cfg = ModelConfig(input_size=(64, 48), image_size=(64, 48), widths=(4, 4, 8, 8), head_width=4,
+                      stem_width=4)  # fmt: skip
+    assert cfg.grid == (16, 12) and cfg.stride == 4.0
+    assert CornerNet(cfg)(torch.rand(1, 3, 48, 64)).shape == (1, 15, 12, 16)
+    old = {k: v for k, v in cfg.to_dict().items() if k != "stem_width"}
+    assert ModelConfig.from_dict(old).stem_width == 0  # files from before the stem
+
+
 def test_hidden_corner_falls_back_on_the_regressed_vector():
     vis = np.array([2, 2, 1, 2])
     target, _ = encode_targets([(GATE_A, vis)], 80, 60)
     ((corners, scores, _),) = decode(_as_logits(target), DecodeConfig(), (4.0, 4.0))
     assert scores[2] == 0.0 and scores[[0, 1, 3]].min() > 0.9
     np.testing.assert_allclose(corners, GATE_A * 4.0 - 0.5, atol=1e-3)
+    assert len(decode(_as_logits(target), DecodeConfig(min_snapped=3), (4.0, 4.0))) == 1
+    assert decode(_as_logits(target), DecodeConfig(min_snapped=4), (4.0, 4.0)) == []
 
 
 def test_augmentation_keeps_keypoints_on_the_gate_corners():

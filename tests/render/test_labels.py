@@ -68,6 +68,19 @@ def test_gate_seen_from_its_exit_side_gives_no_label():
         assert frame_labels(scene, frame, EYE, LEVEL) == []
 
 
+def test_gate_seen_from_behind_is_labelled_with_back_views():
+    track = Track("back", (Gate((4.0, 0.0, 2.0), 180.0),), start_pos=(0.0, 0.0, 0.2))
+    with Scene(track, Camera(uptilt_deg=0.0)) as scene:
+        frame = scene.render(EYE, LEVEL)
+        (lab,) = frame_labels(scene, frame, EYE, LEVEL, back_views=True)
+    assert lab.from_behind and lab.passage is None and lab.gate_id == 0
+    # Named as seen from this side: TL top-left on screen, like any gate approached head-on.
+    tl, tr, br, bl = lab.corners_px
+    assert tl[0] < tr[0] and bl[0] < br[0] and tl[1] < bl[1] and tr[1] < br[1]
+    assert list(lab.visibility) == [VISIBLE] * 4
+    np.testing.assert_allclose(lab.r_cam_gate[:, 0], [0.0, 0.0, 1.0], atol=1e-9)  # x: away
+
+
 def test_gate_flown_both_ways_is_labelled_from_either_side():
     track = Track("twice", (Gate((4.0, 0.0, 2.0)), Gate((4.0, 0.0, 2.0), 180.0)))
     back = np.array([8.0, 0.0, 2.0])

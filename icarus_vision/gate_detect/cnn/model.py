@@ -1,8 +1,9 @@
 """The corner network: a small encoder-decoder that predicts gate centres and corners at stride 4.
 
-Input: an RGB frame resized to ``ModelConfig.input_size`` (160x120 by default, half the camera's
-320x240), scaled to [0, 1]. Output, on a grid of ``stride`` camera pixels per cell (80x60 cells for
-a 320x240 frame):
+Input: an RGB frame resized to ``ModelConfig.input_size``, scaled to [0, 1]: by default the full
+320x240 frame, which a stride-2 stem reduces before the encoder (``stem_width``); without a stem,
+usually half the frame (160x120). Output, on a grid of ``stride`` camera pixels per cell (80x60
+cells for a 320x240 frame either way):
 
 * channel 0: gate-centre heatmap (logits; the centre is the mean of the four opening corners),
 * channels 1-4: corner heatmaps (logits), one per corner type TL, TR, BR, BL,
@@ -31,7 +32,7 @@ VECTOR_SCALE = 8.0
 class ModelConfig:
     """Architecture of the corner network (stored as JSON beside the weights)."""
 
-    input_size: tuple[int, int] = (160, 120)
+    input_size: tuple[int, int] = (320, 240)
     """Network input (width, height), pixels; frames are resized to it (INTER_AREA)."""
     image_size: tuple[int, int] = (320, 240)
     """Camera frame (width, height) the network was trained for, pixels."""
@@ -39,21 +40,36 @@ class ModelConfig:
     """Channels at input strides 2, 4, 8 and 16."""
     head_width: int = 24
     """Channels of the decoder at the output resolution."""
+    stem_width: int = 12
+    """Channels of a stride-2 convolution on the input before the encoder (0: no stem; the
+    output is then at input stride 2 instead of 4)."""
+
+    @property
+    def input_stride(self) -> int:
+        """Input pixels per output cell."""
+        return 4 if self.stem_width else 2
+
+    @property
+    def grid(self) -> tuple[int, int]:
+        """Output (width, height), cells."""
+        w, h = self.input_size
+        return w // self.input_stride, h // self.input_stride
 
     @property
     def stride(self) -> float:
-        """Camera pixels per output cell (the network outputs at input stride 2)."""
-        return 2.0 * self.image_size[0] / self.input_size[0]
+        """Camera pixels per output cell."""
+        return self.input_stride * self.image_size[0] / self.input_size[0]
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
     @classmethod
     def from_dict(cls, d: dict) -> ModelConfig:
-        known = {"input_size", "image_size", "widths", "head_width"}
+        known = {"input_size", "image_size", "widths", "head_width", "stem_width"}
         unknown = set(d) - known
         if unknown:
             raise ValueError(f"unknown model config keys {sorted(unknown)}")
+        d = {"stem_width": 0, **d}  # files written before the stem existed had none
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
@@ -66,12 +82,14 @@ def _conv(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Sequent
 
 
 class CornerNet(nn.Module):
-    """Encoder (strides 2-16) with a dilated context block, FPN-style decoder back to stride 2.
+    """Optional stem, encoder (4 stages of stride 2) with a dilated context block at the last,
+    FPN-style decoder back to the first stage's resolution.
 
     Args:
         cfg: the architecture.
 
-    Shapes: (B, 3, H, W) float in [0, 1] -> (B, 15, H/2, W/2) (see the module docstring).
+    Shapes: (B, 3, H, W) float in [0, 1] -> (B, 15, H/s, W/s), s = ``cfg.input_stride`` (see
+    the module docstring).
     """
 
     def __init__(self, cfg: ModelConfig = ModelConfig()) -> None:
@@ -79,7 +97,8 @@ class CornerNet(nn.Module):
         c1, c2, c3, c4 = cfg.widths
         h = cfg.head_width
         self.cfg = cfg
-        self.enc1 = nn.Sequential(_conv(3, c1, 2), _conv(c1, c1))
+        self.stem = _conv(3, cfg.stem_width, 2) if cfg.stem_width else nn.Identity()
+        self.enc1 = nn.Sequential(_conv(cfg.stem_width or 3, c1, 2), _conv(c1, c1))
         self.enc2 = nn.Sequential(_conv(c1, c2, 2), _conv(c2, c2))
         self.enc3 = nn.Sequential(_conv(c2, c3, 2), _conv(c3, c3))
         self.enc4 = nn.Sequential(
@@ -97,7 +116,7 @@ class CornerNet(nn.Module):
             self.out.bias[:5].fill_(-4.6)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        f1 = self.enc1(x)
+        f1 = self.enc1(self.stem(x))
         f2 = self.enc2(f1)
         f3 = self.enc3(f2)
         f4 = self.enc4(f3)

@@ -31,6 +31,12 @@ class DecodeConfig:
     """Snap radius as a fraction of the regressed opening's mean side (at least 1.5 cells)."""
     max_gates: int = 20
     """Most gates reported per image."""
+    min_snapped: int = 0
+    """Fewest corners that must have snapped to a corner peak for a gate to be reported (a centre
+    peak whose corners the corner maps do not confirm is usually a false alarm)."""
+    nms_iou: float = 0.5
+    """A gate whose opening overlaps a better-scored one's by more than this (intersection over
+    union) is the same gate found twice, and dropped."""
 
 
 def _gaussian(hm: np.ndarray, cx: int, cy: int, sigma: float) -> None:
@@ -171,14 +177,20 @@ def decode(
                 j = int(np.argmin(d))
                 if d[j] <= radius:
                     g[k], scores[k] = pos[j], val[j]
+        if np.count_nonzero(scores) < cfg.min_snapped:
+            continue
         corners = g * np.asarray(scale) - 0.5
         score = float(heat_np[0, cy, cx])
-        if any(_same_gate(corners, c) for c, _, _ in gates):
+        if any(quad_iou(corners, c) > cfg.nms_iou for c, _, _ in gates):
             continue
         gates.append((corners, scores, score))
     return gates
 
 
-def _same_gate(a: np.ndarray, b: np.ndarray) -> bool:
-    side = np.linalg.norm(b - np.roll(b, -1, axis=0), axis=1).mean()
-    return bool(np.linalg.norm(a - b, axis=1).mean() < 0.2 * side)
+def quad_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two (4, 2) quadrilaterals (their convex hulls), in [0, 1]."""
+    ha = cv2.convexHull(np.asarray(a, np.float32))
+    hb = cv2.convexHull(np.asarray(b, np.float32))
+    inter, _ = cv2.intersectConvexConvex(ha, hb)
+    union = cv2.contourArea(ha) + cv2.contourArea(hb) - inter
+    return min(float(inter / union), 1.0) if union > 0 else 0.0

@@ -120,7 +120,7 @@ def train_detector(
         mcfg = model.cfg
     train = load_split(data_dir, "train", mcfg.input_size, cfg.limit)
     val = load_split(data_dir, "val", mcfg.input_size, cfg.limit)
-    grid = (mcfg.input_size[0] // 2, mcfg.input_size[1] // 2)
+    grid = mcfg.grid
     decode_cfg = DecodeConfig()
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = int(np.ceil(len(train.files) / cfg.batch_size))

@@ -20,6 +20,7 @@ from icarus_vision.gate_detect.metrics import evaluate_image, summarize
 CENTRE_THRESHOLDS = (0.15, 0.2, 0.3, 0.4, 0.5, 0.6)
 CORNER_THRESHOLDS = (0.05, 0.1, 0.2, 0.3)
 SNAP_RADII = (0.2, 0.3, 0.4)
+MIN_SNAPPED = (0, 2, 3)
 
 
 def score(metrics: dict) -> float:
@@ -69,8 +70,9 @@ def tune_decode(
     """
     outputs = network_outputs(model, split)
     best = (-1.0, base, {})
-    for c, k, r in itertools.product(CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII):
-        cfg = replace(base, centre_threshold=c, corner_threshold=k, snap_radius=r)
+    grid = itertools.product(CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED)
+    for c, k, r, n in grid:
+        cfg = replace(base, centre_threshold=c, corner_threshold=k, snap_radius=r, min_snapped=n)
         m = metrics_of(outputs, split, cfg, min_gate_px)
         if score(m) > best[0]:
             best = (score(m), cfg, m)
