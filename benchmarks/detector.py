@@ -2,9 +2,9 @@
 
 Usage::
 
-    icarus-vision gen-dataset --recipe datasets/gates-v1.toml --out datasets/gates-v1-test \\
-        --num-images 3000 --seed 1          # held out: the shipped CNN was trained on seed 0
-    python benchmarks/detector.py [--data datasets/gates-v1-test] [--detectors cnn opencv]
+    icarus-vision gen-dataset --recipe datasets/gates-v1.toml --out datasets/gates-v2-test \\
+        --num-images 10000 --seed 1        # held out: the shipped CNN was trained on seed 0
+    python benchmarks/detector.py [--data datasets/gates-v2-test] [--detectors cnn opencv]
                                   [--limit N] [--json PATH]
 
 For each detector: the test-split figures of ``eval_detector`` (precision, recall, corner error,
@@ -29,7 +29,7 @@ from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.evaluate import eval_detector, one_thread
 
-DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v1-test"
+DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v2-test"
 
 
 def latency(spec: str, data: Path, frames: int = 50, passes: int = 5) -> dict:

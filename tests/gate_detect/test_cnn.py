@@ -13,14 +13,9 @@ from icarus_vision.gate_detect.cnn import CnnDetector
 from icarus_vision.gate_detect.cnn.augment import make_augment
 from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
 from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, mirror
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, quad_iou
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
-from icarus_vision.gate_detect.cnn.targets import (
-    DecodeConfig,
-    decode,
-    detection_loss,
-    encode_targets,
-    quad_iou,
-)
+from icarus_vision.gate_detect.cnn.targets import detection_loss, encode_targets
 from tests.gate_detect.conftest import TINY_MODEL
 
 GATE_A = np.array([[30.3, 20.6], [52.2, 21.4], [51.7, 44.9], [29.1, 43.2]])  # grid units
@@ -52,7 +47,18 @@ def test_a_gate_found_twice_is_reported_once():
     logits[0, 32, 42] = logits[0].max() - 0.1
     logits[7:15, 32, 42] = torch.from_numpy(((GATE_A - (42, 32)) / 8.0).reshape(-1))
     assert len(decode(logits, DecodeConfig(), (4.0, 4.0))) == 1
-    assert len(decode(logits, DecodeConfig(nms_iou=1.0), (4.0, 4.0))) == 2
+    assert len(decode(logits, DecodeConfig(nms_iou=1.0, nested=False), (4.0, 4.0))) == 2
+
+
+def test_a_gate_seen_through_another_is_found_though_they_share_a_centre():
+    far = (GATE_A - GATE_A.mean(axis=0)) * 0.4 + GATE_A.mean(axis=0) + (0.1, 0.05)
+    target, _ = encode_targets([(GATE_A, VIS), (far, VIS)], 80, 60)
+    logits = _as_logits(target)  # the shared centre cell regresses only the near gate
+    assert len(decode(logits, DecodeConfig(nested=False), (4.0, 4.0))) == 1
+    found = decode(logits, DecodeConfig(), (4.0, 4.0))
+    assert len(found) == 2
+    for truth in (GATE_A, far):
+        assert min(np.abs(c - (truth * 4.0 - 0.5)).max() for c, _, _ in found) < 1e-3
 
 
 def test_quad_iou():

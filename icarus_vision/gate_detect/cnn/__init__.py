@@ -17,8 +17,8 @@ from torch import nn
 
 from icarus_vision.gate_detect.base import Detector, GateDetection, validate_image
 from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import CornerNet
-from icarus_vision.gate_detect.cnn.targets import DecodeConfig, decode
 from icarus_vision.gate_detect.registry import register_detector
 
 

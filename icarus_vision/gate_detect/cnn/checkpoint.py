@@ -18,8 +18,8 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
 from icarus_vision.fileio import atomic_write_json
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
-from icarus_vision.gate_detect.cnn.targets import DecodeConfig
 
 FORMAT = "icarus-vision-detector/1"
 WEIGHTS, CONFIG, ONNX = "model.safetensors", "detector.json", "model.onnx"

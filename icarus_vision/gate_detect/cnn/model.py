@@ -10,9 +10,7 @@ cells for a 320x240 frame either way):
 * channels 5-6: sub-cell offset (x, y) of a corner relative to the cell's top-left, in cells,
 * channels 7-14: the four corners relative to the centre cell, (dx, dy) per corner, in cells / 8.
 
-Grouping corners into gates (``decode.py``): each centre peak predicts its four corners by
-regression; each is then snapped to the nearest peak of the same corner type's heatmap, which is
-more precise.
+Grouping corners into gates: ``decode.py``.
 """
 
 from __future__ import annotations

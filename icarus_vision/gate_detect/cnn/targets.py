@@ -1,4 +1,4 @@
-"""Training targets of the corner network and the decoding of its output into gate detections.
+"""Training targets and loss of the corner network (decoding its output: ``decode.py``).
 
 Coordinates: a camera pixel (u, v) has its centre at integer values (OpenCV); the continuous
 coordinate ``c = u + 0.5`` puts the image's left edge at 0. On the output grid (``stride`` camera
@@ -8,35 +8,12 @@ pixels per cell) a point lies at ``g = c / stride``: in cell ``floor(g)`` with s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-import cv2
 import numpy as np
 import torch
 
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
 
 CENTRE, CORNERS, OFFSET, VECTORS = 0, slice(1, 5), slice(5, 7), slice(7, 15)
-
-
-@dataclass(frozen=True)
-class DecodeConfig:
-    """Thresholds that turn the network's maps into detections (stored with the weights)."""
-
-    centre_threshold: float = 0.3
-    """Smallest centre-heatmap peak reported as a gate."""
-    corner_threshold: float = 0.1
-    """Smallest corner-heatmap peak a regressed corner may snap to."""
-    snap_radius: float = 0.3
-    """Snap radius as a fraction of the regressed opening's mean side (at least 1.5 cells)."""
-    max_gates: int = 20
-    """Most gates reported per image."""
-    min_snapped: int = 0
-    """Fewest corners that must have snapped to a corner peak for a gate to be reported (a centre
-    peak whose corners the corner maps do not confirm is usually a false alarm)."""
-    nms_iou: float = 0.5
-    """A gate whose opening overlaps a better-scored one's by more than this (intersection over
-    union) is the same gate found twice, and dropped."""
 
 
 def _gaussian(hm: np.ndarray, cx: int, cy: int, sigma: float) -> None:
@@ -131,66 +108,3 @@ def detection_loss(out: torch.Tensor, target: torch.Tensor, weight: torch.Tensor
         "offset": offset,
         "vectors": vectors,
     }
-
-
-_KERNEL = np.ones((3, 3), np.uint8)
-
-
-def _peaks(heat: np.ndarray, threshold: float) -> np.ndarray:
-    """(H, W) probabilities -> boolean local maxima (3x3) at or above ``threshold``."""
-    return (heat == cv2.dilate(heat, _KERNEL)) & (heat >= threshold)
-
-
-def decode(
-    out: torch.Tensor, cfg: DecodeConfig, scale: tuple[float, float]
-) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """Gates from one image's network output.
-
-    Args:
-        out: (15, H, W) raw network output.
-        cfg: thresholds.
-        scale: (sx, sy) camera pixels per grid cell.
-
-    Returns:
-        per gate ``(corners (4, 2) pixels TL, TR, BR, BL, corner_scores (4,), score)``, best first.
-    """
-    maps = np.ascontiguousarray(out.detach().numpy(), dtype=np.float32)
-    heat_np, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
-    cys, cxs = np.nonzero(_peaks(heat_np[0], cfg.centre_threshold))
-    order = np.argsort(-heat_np[0, cys, cxs])[: cfg.max_gates]
-    cand = []
-    for k in range(4):
-        ys, xs = np.nonzero(_peaks(heat_np[1 + k], cfg.corner_threshold))
-        pos = np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1)
-        cand.append((pos, heat_np[1 + k, ys, xs]))
-    gates = []
-    for i in order:
-        cx, cy = cxs[i], cys[i]
-        g = np.array([cx, cy], float) + VECTOR_SCALE * reg[2:, cy, cx].reshape(4, 2)
-        side = float(np.linalg.norm(g - np.roll(g, -1, axis=0), axis=1).mean())
-        radius = max(1.5, cfg.snap_radius * side)
-        scores = np.zeros(4)
-        for k in range(4):
-            pos, val = cand[k]
-            if len(pos):
-                d = np.linalg.norm(pos - g[k], axis=1)
-                j = int(np.argmin(d))
-                if d[j] <= radius:
-                    g[k], scores[k] = pos[j], val[j]
-        if np.count_nonzero(scores) < cfg.min_snapped:
-            continue
-        corners = g * np.asarray(scale) - 0.5
-        score = float(heat_np[0, cy, cx])
-        if any(quad_iou(corners, c) > cfg.nms_iou for c, _, _ in gates):
-            continue
-        gates.append((corners, scores, score))
-    return gates
-
-
-def quad_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two (4, 2) quadrilaterals (their convex hulls), in [0, 1]."""
-    ha = cv2.convexHull(np.asarray(a, np.float32))
-    hb = cv2.convexHull(np.asarray(b, np.float32))
-    inter, _ = cv2.intersectConvexConvex(ha, hb)
-    union = cv2.contourArea(ha) + cv2.contourArea(hb) - inter
-    return min(float(inter / union), 1.0) if union > 0 else 0.0

@@ -29,8 +29,9 @@ from torch.utils.data import DataLoader
 from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
 from icarus_vision.gate_detect.cnn.data import GateDataset, load_split
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
-from icarus_vision.gate_detect.cnn.targets import DecodeConfig, detection_loss
+from icarus_vision.gate_detect.cnn.targets import detection_loss
 from icarus_vision.gate_detect.cnn.tune import score as _score
 from icarus_vision.gate_detect.cnn.tune import tune_decode, validate
 

@@ -13,14 +13,15 @@ import numpy as np
 import torch
 
 from icarus_vision.gate_detect.cnn.data import Split
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import CornerNet
-from icarus_vision.gate_detect.cnn.targets import DecodeConfig, decode
 from icarus_vision.gate_detect.metrics import evaluate_image, summarize
 
-CENTRE_THRESHOLDS = (0.15, 0.2, 0.3, 0.4, 0.5, 0.6)
-CORNER_THRESHOLDS = (0.05, 0.1, 0.2, 0.3)
-SNAP_RADII = (0.2, 0.3, 0.4)
-MIN_SNAPPED = (0, 2, 3)
+CENTRE_THRESHOLDS = (0.2, 0.3, 0.4, 0.5)
+CORNER_THRESHOLDS = (0.1, 0.2, 0.3)
+SNAP_RADII = (0.3, 0.4)
+MIN_SNAPPED = (0, 3)
+NESTED = (False, True)
 
 
 def score(metrics: dict) -> float:
@@ -70,9 +71,11 @@ def tune_decode(
     """
     outputs = network_outputs(model, split)
     best = (-1.0, base, {})
-    grid = itertools.product(CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED)
-    for c, k, r, n in grid:
-        cfg = replace(base, centre_threshold=c, corner_threshold=k, snap_radius=r, min_snapped=n)
+    grid = itertools.product(CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED, NESTED)
+    for c, k, r, n, nest in grid:
+        cfg = replace(
+            base, centre_threshold=c, corner_threshold=k, snap_radius=r, min_snapped=n, nested=nest
+        )
         m = metrics_of(outputs, split, cfg, min_gate_px)
         if score(m) > best[0]:
             best = (score(m), cfg, m)

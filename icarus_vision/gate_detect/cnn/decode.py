@@ -1,0 +1,199 @@
+"""Decoding the corner network's maps into gate detections.
+
+Each centre peak regresses its gate's four corners; each is then snapped to the nearest peak of the
+same corner type's heatmap, which is more precise. On a racing line the next gates are often seen
+through the opening of the nearest one, all with nearly the same centre, and a centre peak can
+regress only one of them. So each centre peak also looks for corner peaks, three or four of them,
+shaped like its regressed gate at another scale: each such set is one more gate hypothesis (a
+gate nested in, or around, the regressed one). Duplicates are removed by overlap at the end.
+
+Grid units throughout (cells of the output map); ``decode`` converts to camera pixels at the end.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+
+from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
+
+
+@dataclass(frozen=True)
+class DecodeConfig:
+    """Thresholds that turn the network's maps into detections (stored with the weights)."""
+
+    centre_threshold: float = 0.3
+    """Smallest centre-heatmap peak reported as a gate."""
+    corner_threshold: float = 0.1
+    """Smallest corner-heatmap peak a regressed corner may snap to."""
+    snap_radius: float = 0.3
+    """Snap radius as a fraction of the regressed opening's mean side (at least 1.5 cells)."""
+    max_gates: int = 20
+    """Most gates reported per image."""
+    min_snapped: int = 0
+    """Fewest corners that must have snapped to a corner peak for a gate to be reported (a centre
+    peak whose corners the corner maps do not confirm is usually a false alarm)."""
+    nms_iou: float = 0.5
+    """A gate whose opening overlaps a better-scored one's by more than this (intersection over
+    union) is the same gate found twice, and dropped."""
+    nested: bool = True
+    """Look for gates nested in (or around) each regressed one (module docstring)."""
+
+
+NESTED_SCALE = (0.15, 6.0)
+"""Scales, relative to the regressed gate, searched for nested gates."""
+NESTED_MAX_TURN = np.radians(12.0)
+"""Largest in-image rotation of a nested gate relative to the regressed one, radians."""
+NESTED_MAX_RESIDUAL = 0.05
+"""Largest RMS misfit of a nested gate's corners to the regressed shape, relative to its size."""
+NESTED_MAX_OFFSET = 0.3
+"""Largest distance from the centre peak to a nested gate's centre, relative to its mean side."""
+MAX_PEAKS_PER_TYPE = 6
+"""Corner peaks of each type (the strongest near the centre) tried for nested gates."""
+
+_KERNEL = np.ones((3, 3), np.uint8)
+
+
+def _peaks(heat: np.ndarray, threshold: float) -> np.ndarray:
+    """(H, W) probabilities -> boolean local maxima (3x3) at or above ``threshold``."""
+    return (heat == cv2.dilate(heat, _KERNEL)) & (heat >= threshold)
+
+
+def nested_gates(
+    centre: np.ndarray, vectors: np.ndarray, cand: list[tuple[np.ndarray, np.ndarray]]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Other gates around one centre peak: corner peaks shaped like the regressed gate.
+
+    Every choice of one peak (or none) per corner type, with at least three peaks, is fitted to
+    the regressed shape by a similarity transform (scale, rotation, shift; least squares). A
+    choice is a gate when the fit is close (``NESTED_MAX_RESIDUAL``), barely rotated, at another
+    scale within ``NESTED_SCALE`` and centred near the peak; a missing corner comes from the fit.
+
+    Args:
+        centre: (2,) centre cell.
+        vectors: (4, 2) regressed centre-to-corner vectors, cells.
+        cand: per corner type, (peak positions (N, 2), peak scores (N,)).
+
+    Returns:
+        per gate ``(corners (4, 2) cells, scores (4,): 0 for a fitted corner)``.
+    """
+    side = float(np.linalg.norm(vectors - np.roll(vectors, -1, axis=0), axis=1).mean())
+    if side < 1e-3:
+        return []
+    pts, vals = [], []
+    for pos, val in cand:  # the peaks nearest the centre, plus "none" (NaN) for each type
+        near = np.argsort(np.linalg.norm(pos - centre, axis=1))[:MAX_PEAKS_PER_TYPE]
+        pts.append(np.concatenate([pos[near, 0] + 1j * pos[near, 1], [np.nan]]))
+        vals.append(np.concatenate([val[near], [0.0]]))
+    grids = np.meshgrid(*[np.arange(len(p)) for p in pts], indexing="ij")
+    idx = np.stack([g.reshape(-1) for g in grids], axis=1)  # (M, 4) choices
+    q = np.stack([pts[k][idx[:, k]] for k in range(4)], axis=1)  # (M, 4) complex peaks
+    have = ~np.isnan(q)
+    keep = have.sum(axis=1) >= 3
+    q, have, idx = q[keep], have[keep], idx[keep]
+    if not len(q):
+        return []
+    tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
+    n = have.sum(axis=1)
+    p_mean = (tmpl * have).sum(axis=1) / n
+    q_mean = np.where(have, q, 0).sum(axis=1) / n
+    dp = np.where(have, tmpl - p_mean[:, None], 0)
+    dq = np.where(have, q - q_mean[:, None], 0)
+    a = (np.conj(dp) * dq).sum(axis=1) / (np.abs(dp) ** 2).sum(axis=1)  # scale * e^(i turn)
+    fit = a[:, None] * (tmpl - p_mean[:, None]) + q_mean[:, None]  # (M, 4)
+    scale = np.maximum(np.abs(a), 1e-9)
+    resid = np.sqrt((np.where(have, np.abs(fit - q), 0) ** 2).sum(axis=1) / n) / (scale * side)
+    offset = np.abs(fit.mean(axis=1) - (centre[0] + 1j * centre[1])) / (scale * side)
+    ok = (
+        (resid < NESTED_MAX_RESIDUAL)
+        & (np.abs(np.angle(a)) < NESTED_MAX_TURN)
+        & (scale > NESTED_SCALE[0])
+        & (scale < NESTED_SCALE[1])
+        & (offset < NESTED_MAX_OFFSET)
+    )
+    out = []
+    for m in np.flatnonzero(ok):
+        c = np.where(have[m], q[m], fit[m])
+        scores = np.array([vals[k][idx[m, k]] for k in range(4)])
+        out.append((np.stack([c.real, c.imag], axis=1), scores))
+    return out
+
+
+def _snap(
+    g: np.ndarray, cand: list[tuple[np.ndarray, np.ndarray]], snap_radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Move each corner of ``g`` (4, 2) to the nearest peak of its type within the snap radius.
+
+    Returns:
+        (corners (4, 2), scores (4,): the peak's score, 0 where nothing was near).
+    """
+    g = g.copy()
+    side = float(np.linalg.norm(g - np.roll(g, -1, axis=0), axis=1).mean())
+    radius = max(1.5, snap_radius * side)
+    scores = np.zeros(4)
+    for k, (pos, val) in enumerate(cand):
+        if len(pos):
+            d = np.linalg.norm(pos - g[k], axis=1)
+            j = int(np.argmin(d))
+            if d[j] <= radius:
+                g[k], scores[k] = pos[j], val[j]
+    return g, scores
+
+
+def decode(
+    out: torch.Tensor, cfg: DecodeConfig, scale: tuple[float, float]
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Gates from one image's network output.
+
+    Args:
+        out: (15, H, W) raw network output.
+        cfg: thresholds.
+        scale: (sx, sy) camera pixels per grid cell.
+
+    Returns:
+        per gate ``(corners (4, 2) pixels TL, TR, BR, BL, corner_scores (4,), score)``, best first.
+        A regressed gate's score is its centre peak's; a nested one's is that times the mean
+        score of its corners.
+    """
+    maps = np.ascontiguousarray(out.detach().numpy(), dtype=np.float32)
+    heat_np, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
+    cys, cxs = np.nonzero(_peaks(heat_np[0], cfg.centre_threshold))
+    order = np.argsort(-heat_np[0, cys, cxs])[: cfg.max_gates]
+    cand = []
+    for k in range(4):
+        ys, xs = np.nonzero(_peaks(heat_np[1 + k], cfg.corner_threshold))
+        pos = np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1)
+        cand.append((pos, heat_np[1 + k, ys, xs]))
+    found = []
+    for i in order:
+        centre = np.array([cxs[i], cys[i]], float)
+        vectors = VECTOR_SCALE * reg[2:, cys[i], cxs[i]].reshape(4, 2)
+        score = float(heat_np[0, cys[i], cxs[i]])
+        g, scores = _snap(centre + vectors, cand, cfg.snap_radius)
+        found.append((g, scores, score))
+        for g, scores in nested_gates(centre, vectors, cand) if cfg.nested else ():
+            found.append((g, scores, score * float(scores.mean())))
+    found.sort(key=lambda f: -f[2])
+    gates = []
+    for g, scores, score in found:
+        if np.count_nonzero(scores) < cfg.min_snapped:
+            continue
+        corners = g * np.asarray(scale) - 0.5
+        if any(quad_iou(corners, c) > cfg.nms_iou for c, _, _ in gates):
+            continue
+        gates.append((corners, scores, score))
+        if len(gates) == cfg.max_gates:
+            break
+    return gates
+
+
+def quad_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two (4, 2) quadrilaterals (their convex hulls), in [0, 1]."""
+    ha = cv2.convexHull(np.asarray(a, np.float32))
+    hb = cv2.convexHull(np.asarray(b, np.float32))
+    inter, _ = cv2.intersectConvexConvex(ha, hb)
+    union = cv2.contourArea(ha) + cv2.contourArea(hb) - inter
+    return min(float(inter / union), 1.0) if union > 0 else 0.0
