@@ -51,8 +51,13 @@ NESTED_MAX_RESIDUAL = 0.05
 """Largest RMS misfit of a nested gate's corners to the regressed shape, relative to its size."""
 NESTED_MAX_OFFSET = 0.3
 """Largest distance from the centre peak to a nested gate's centre, relative to its mean side."""
-MAX_PEAKS_PER_TYPE = 6
-"""Corner peaks of each type (the strongest near the centre) tried for nested gates."""
+NESTED_MIN_CORNERS = 3
+"""Corner peaks (of four) that a nested gate needs."""
+NESTED_SECTOR_TAN = 0.6
+"""Corner peaks tried for a nested gate lie within atan(0.6) = 31 degrees of the regressed corner's
+direction from the centre (wider than ``NESTED_MAX_TURN``: the centres of nested gates differ)."""
+MAX_PEAKS_PER_TYPE = 4
+"""Corner peaks of each type (those nearest the regressed direction) tried for nested gates."""
 
 _KERNEL = np.ones((3, 3), np.uint8)
 
@@ -83,20 +88,29 @@ def nested_gates(
     side = float(np.linalg.norm(vectors - np.roll(vectors, -1, axis=0), axis=1).mean())
     if side < 1e-3:
         return []
+    tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
+    c0 = centre[0] + 1j * centre[1]
     pts, vals = [], []
-    for pos, val in cand:  # the peaks nearest the centre, plus "none" (NaN) for each type
-        near = np.argsort(np.linalg.norm(pos - centre, axis=1))[:MAX_PEAKS_PER_TYPE]
-        pts.append(np.concatenate([pos[near, 0] + 1j * pos[near, 1], [np.nan]]))
-        vals.append(np.concatenate([val[near], [0.0]]))
+    for (pos, val), v in zip(cand, tmpl, strict=True):  # peaks in the sector, plus "none" (NaN)
+        z = pos[:, 0] + 1j * pos[:, 1]
+        w = (z - c0) / v if v != 0 else np.full(len(z), np.nan + 0j)
+        r = w.real  # scale along the regressed corner's direction; imag / real: tan of the angle
+        ok = np.flatnonzero(
+            (r > NESTED_SCALE[0]) & (r < NESTED_SCALE[1]) & (np.abs(w.imag) < NESTED_SECTOR_TAN * r)
+        )
+        near = ok[np.argsort(np.abs(w.imag[ok]) / r[ok])[:MAX_PEAKS_PER_TYPE]]
+        pts.append(np.append(z[near], np.nan))
+        vals.append(np.append(val[near], 0.0))
+    if sum(len(p) > 1 for p in pts) < NESTED_MIN_CORNERS:
+        return []
     grids = np.meshgrid(*[np.arange(len(p)) for p in pts], indexing="ij")
     idx = np.stack([g.reshape(-1) for g in grids], axis=1)  # (M, 4) choices
     q = np.stack([pts[k][idx[:, k]] for k in range(4)], axis=1)  # (M, 4) complex peaks
     have = ~np.isnan(q)
-    keep = have.sum(axis=1) >= 3
+    keep = have.sum(axis=1) >= NESTED_MIN_CORNERS
     q, have, idx = q[keep], have[keep], idx[keep]
     if not len(q):
         return []
-    tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
     n = have.sum(axis=1)
     p_mean = (tmpl * have).sum(axis=1) / n
     q_mean = np.where(have, q, 0).sum(axis=1) / n
@@ -106,7 +120,7 @@ def nested_gates(
     fit = a[:, None] * (tmpl - p_mean[:, None]) + q_mean[:, None]  # (M, 4)
     scale = np.maximum(np.abs(a), 1e-9)
     resid = np.sqrt((np.where(have, np.abs(fit - q), 0) ** 2).sum(axis=1) / n) / (scale * side)
-    offset = np.abs(fit.mean(axis=1) - (centre[0] + 1j * centre[1])) / (scale * side)
+    offset = np.abs(fit.mean(axis=1) - c0) / (scale * side)
     ok = (
         (resid < NESTED_MAX_RESIDUAL)
         & (np.abs(np.angle(a)) < NESTED_MAX_TURN)
@@ -167,13 +181,16 @@ def decode(
         ys, xs = np.nonzero(_peaks(heat_np[1 + k], cfg.corner_threshold))
         pos = np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1)
         cand.append((pos, heat_np[1 + k, ys, xs]))
-    found = []
+    found, primaries = [], []
     for i in order:
         centre = np.array([cxs[i], cys[i]], float)
         vectors = VECTOR_SCALE * reg[2:, cys[i], cxs[i]].reshape(4, 2)
         score = float(heat_np[0, cys[i], cxs[i]])
         g, scores = _snap(centre + vectors, cand, cfg.snap_radius)
         found.append((g, scores, score))
+        if any(quad_iou(g, p) > cfg.nms_iou for p in primaries):
+            continue  # a weaker peak of a gate already searched around
+        primaries.append(g)
         for g, scores in nested_gates(centre, vectors, cand) if cfg.nested else ():
             found.append((g, scores, score * float(scores.mean())))
     found.sort(key=lambda f: -f[2])
