@@ -128,10 +128,11 @@ class EstimatorConfig:
 
 DETECTOR_PIXEL_SIGMA = {"cnn": 12.0, "opencv": 1.5}
 """Corner error (px, 1σ) the estimator assumes for each image detector. The CNN's errors are
-heavy-tailed (eval-detector: median 2 px, mean 3 px, large gates 4-6 px, some false positives), so
-the filter trusts it as a 12 px sensor. Chosen with the shipped policy on random 10-gate races with
-seeds 0-59 (8 px: 78 % finish, 12 px: 92 %) and on five estimator flights (grand-prix seeds 10-11,
-random tracks seeds 12-14), then measured on other seeds and on ten-gates (README)."""
+heavy-tailed (a median near 1.3 px, but a few corners off by many pixels, and some false
+positives), so the filter trusts it as a 12 px sensor. Chosen for the first shipped CNN with the
+shipped policy on random 10-gate races with seeds 0-59 (8 px: 78 % finish, 12 px: 92 %) and on five
+estimator flights (grand-prix seeds 10-11, random tracks seeds 12-14); re-measured with the current
+network on other seeds and on ten-gates (README)."""
 
 DETECTOR_RANGE_INFLATION_M = {"cnn": 10.0}
 """``MeasurementConfig.range_inflation_m`` of each detector (others: off). The CNN can see a gate

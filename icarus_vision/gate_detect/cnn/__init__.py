@@ -35,6 +35,15 @@ def fuse_batchnorm(model: nn.Module) -> nn.Module:
     return model
 
 
+def native_bf16() -> bool:
+    """Whether this CPU computes in bfloat16 natively (AVX512-BF16 or AMX; Linux /proc/cpuinfo)."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+    return "avx512_bf16" in flags or "amx_bf16" in flags
+
+
 class CnnDetector(Detector):
     """Gates found by the corner network.
 
@@ -45,12 +54,19 @@ class CnnDetector(Detector):
             the detector is built. 1 by default: this small network gains nothing from more
             threads, and threads contending with other work on a busy machine can slow every
             frame down many times (switching per call costs more than the inference itself).
+        bf16: run the network in bfloat16 (autocast; it was trained that way), about 1.4x faster
+            where the CPU has bfloat16 arithmetic; None: where it has (:func:`native_bf16`).
+            Decoding stays float32.
     """
 
     name = "cnn"
 
     def __init__(
-        self, model: CornerNet, decode_cfg: DecodeConfig = DecodeConfig(), threads: int | None = 1
+        self,
+        model: CornerNet,
+        decode_cfg: DecodeConfig = DecodeConfig(),
+        threads: int | None = 1,
+        bf16: bool | None = None,
     ) -> None:
         # Folded batch norm and channels-last memory: about 1.4x faster on a CPU core.
         self.model = fuse_batchnorm(model.eval()).to(memory_format=torch.channels_last)
@@ -58,6 +74,7 @@ class CnnDetector(Detector):
             torch.set_num_threads(threads)
         self.decode_cfg = decode_cfg
         self.input_size = tuple(model.cfg.input_size)
+        self.bf16 = native_bf16() if bf16 is None else bool(bf16)
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> CnnDetector:
@@ -77,8 +94,8 @@ class CnnDetector(Detector):
             return []
         x = torch.from_numpy(np.stack([self._prepare(im) for im in images]))
         x = x.contiguous(memory_format=torch.channels_last)
-        with torch.inference_mode():
-            out = self.model(x)
+        with torch.inference_mode(), torch.autocast("cpu", torch.bfloat16, enabled=self.bf16):
+            out = self.model(x).float()
         results = []
         for im, o in zip(images, out, strict=True):
             h, w = im.shape[:2]

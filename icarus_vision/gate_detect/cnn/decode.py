@@ -68,7 +68,7 @@ def _peaks(heat: np.ndarray, threshold: float) -> np.ndarray:
 
 
 def nested_gates(
-    centre: np.ndarray, vectors: np.ndarray, cand: list[tuple[np.ndarray, np.ndarray]]
+    centre: np.ndarray, vectors: np.ndarray, peaks: tuple[np.ndarray, np.ndarray, np.ndarray]
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Other gates around one centre peak: corner peaks shaped like the regressed gate.
 
@@ -80,37 +80,45 @@ def nested_gates(
     Args:
         centre: (2,) centre cell.
         vectors: (4, 2) regressed centre-to-corner vectors, cells.
-        cand: per corner type, (peak positions (N, 2), peak scores (N,)).
+        peaks: every corner peak: positions (N,) complex x + iy, cells; types (N,) int 0-3;
+            scores (N,).
 
     Returns:
         per gate ``(corners (4, 2) cells, scores (4,): 0 for a fitted corner)``.
     """
-    side = float(np.linalg.norm(vectors - np.roll(vectors, -1, axis=0), axis=1).mean())
-    if side < 1e-3:
+    side = float(
+        np.abs(np.diff(vectors[[0, 1, 2, 3, 0], 0] + 1j * vectors[[0, 1, 2, 3, 0], 1])).mean()
+    )
+    z, kind, val = peaks
+    if side < 1e-3 or len(z) < NESTED_MIN_CORNERS:
         return []
     tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
     c0 = centre[0] + 1j * centre[1]
-    pts, vals = [], []
-    for (pos, val), v in zip(cand, tmpl, strict=True):  # peaks in the sector, plus "none" (NaN)
-        z = pos[:, 0] + 1j * pos[:, 1]
-        w = (z - c0) / v if v != 0 else np.full(len(z), np.nan + 0j)
-        r = w.real  # scale along the regressed corner's direction; imag / real: tan of the angle
-        ok = np.flatnonzero(
-            (r > NESTED_SCALE[0]) & (r < NESTED_SCALE[1]) & (np.abs(w.imag) < NESTED_SECTOR_TAN * r)
-        )
-        near = ok[np.argsort(np.abs(w.imag[ok]) / r[ok])[:MAX_PEAKS_PER_TYPE]]
-        pts.append(np.append(z[near], np.nan))
-        vals.append(np.append(val[near], 0.0))
-    if sum(len(p) > 1 for p in pts) < NESTED_MIN_CORNERS:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = (z - c0) / tmpl[kind]  # real: scale along the regressed corner's direction
+        tan = np.abs(w.imag) / w.real
+    sel = np.flatnonzero(
+        (w.real > NESTED_SCALE[0]) & (w.real < NESTED_SCALE[1]) & (tan < NESTED_SECTOR_TAN)
+    )
+    sel = sel[np.lexsort((tan[sel], kind[sel]))]  # by type, then nearest the direction first
+    k = kind[sel]
+    rank = np.arange(len(sel)) - np.searchsorted(k, k)  # position within its type
+    sel, k, rank = (
+        sel[rank < MAX_PEAKS_PER_TYPE],
+        k[rank < MAX_PEAKS_PER_TYPE],
+        rank[rank < MAX_PEAKS_PER_TYPE],
+    )
+    counts = np.bincount(k, minlength=4)
+    if np.count_nonzero(counts) < NESTED_MIN_CORNERS:
         return []
-    grids = np.meshgrid(*[np.arange(len(p)) for p in pts], indexing="ij")
-    idx = np.stack([g.reshape(-1) for g in grids], axis=1)  # (M, 4) choices
-    q = np.stack([pts[k][idx[:, k]] for k in range(4)], axis=1)  # (M, 4) complex peaks
+    pts = np.full((4, MAX_PEAKS_PER_TYPE + 1), np.nan + 0j)  # column 0: "no peak"
+    vals = np.zeros((4, MAX_PEAKS_PER_TYPE + 1))
+    pts[k, rank + 1], vals[k, rank + 1] = z[sel], val[sel]
+    idx = np.indices(tuple(counts + 1)).reshape(4, -1).T  # (M, 4) choices
+    q = pts[np.arange(4), idx]  # (M, 4) complex peaks
     have = ~np.isnan(q)
     keep = have.sum(axis=1) >= NESTED_MIN_CORNERS
     q, have, idx = q[keep], have[keep], idx[keep]
-    if not len(q):
-        return []
     n = have.sum(axis=1)
     p_mean = (tmpl * have).sum(axis=1) / n
     q_mean = np.where(have, q, 0).sum(axis=1) / n
@@ -131,8 +139,7 @@ def nested_gates(
     out = []
     for m in np.flatnonzero(ok):
         c = np.where(have[m], q[m], fit[m])
-        scores = np.array([vals[k][idx[m, k]] for k in range(4)])
-        out.append((np.stack([c.real, c.imag], axis=1), scores))
+        out.append((np.stack([c.real, c.imag], axis=1), vals[np.arange(4), idx[m]]))
     return out
 
 
@@ -181,6 +188,11 @@ def decode(
         ys, xs = np.nonzero(_peaks(heat_np[1 + k], cfg.corner_threshold))
         pos = np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1)
         cand.append((pos, heat_np[1 + k, ys, xs]))
+    peaks = (
+        np.concatenate([p[:, 0] + 1j * p[:, 1] for p, _ in cand]),
+        np.concatenate([np.full(len(p), k) for k, (p, _) in enumerate(cand)]),
+        np.concatenate([v for _, v in cand]),
+    )
     found, primaries = [], []
     for i in order:
         centre = np.array([cxs[i], cys[i]], float)
@@ -191,7 +203,7 @@ def decode(
         if any(quad_iou(g, p) > cfg.nms_iou for p in primaries):
             continue  # a weaker peak of a gate already searched around
         primaries.append(g)
-        for g, scores in nested_gates(centre, vectors, cand) if cfg.nested else ():
+        for g, scores in nested_gates(centre, vectors, peaks) if cfg.nested else ():
             found.append((g, scores, score * float(scores.mean())))
     found.sort(key=lambda f: -f[2])
     gates = []
