@@ -86,13 +86,11 @@ def nested_gates(
     Returns:
         per gate ``(corners (4, 2) cells, scores (4,): 0 for a fitted corner)``.
     """
-    side = float(
-        np.abs(np.diff(vectors[[0, 1, 2, 3, 0], 0] + 1j * vectors[[0, 1, 2, 3, 0], 1])).mean()
-    )
+    tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
+    side = float(np.abs(np.diff(tmpl[[0, 1, 2, 3, 0]])).mean())
     z, kind, val = peaks
     if side < 1e-3 or len(z) < NESTED_MIN_CORNERS:
         return []
-    tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
     c0 = centre[0] + 1j * centre[1]
     with np.errstate(divide="ignore", invalid="ignore"):
         w = (z - c0) / tmpl[kind]  # real: scale along the regressed corner's direction
