@@ -34,6 +34,9 @@ def eval_detector_cmd(
     ),
     min_gate_px: float = typer.Option(20.0, help="Smallest counted gate (mean side), pixels."),
     limit: int = typer.Option(None, min=1, help="Evaluate only the first N test images."),
+    examples: Path = typer.Option(
+        None, help="Also draw 12 test images with true and found gates (.jpg/.png)."
+    ),
 ) -> None:
     """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size.
 
@@ -55,7 +58,7 @@ def eval_detector_cmd(
             bar.update(task, completed=done)
 
         r = eval_detector(data, detector, json_path, error_model, min_gate_px, limit=limit,
-                          progress=progress)  # fmt: skip
+                          progress=progress, examples_path=examples)  # fmt: skip
     table = Table(title=f"{r['detector']} on {r['images']} images, {r['gates']} gates >= "
                   f"{r['min_gate_px']:g} px")  # fmt: skip
     for col in ("distance m", "gates", "precision", "recall", "median px", "PCK@2", "PCK@5"):
@@ -68,5 +71,7 @@ def eval_detector_cmd(
     console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core)", highlight=False)
     if r["error_model_path"]:
         console.print(f"error model written to {escape(r['error_model_path'])}", highlight=False)
+    if r["examples_path"]:
+        console.print(f"examples drawn in {escape(r['examples_path'])}", highlight=False)
     if json_path is not None:
         console.print(f"report written to {escape(str(json_path))}", highlight=False)

@@ -15,8 +15,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from icarus_vision.fileio import atomic_write_json
+from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.draw import draw_detections, sheet
 from icarus_vision.gate_detect.error_model import build_error_model, gate_error, viewing_angle_deg
 from icarus_vision.gate_detect.metrics import (
     DISTANCE_BINS_M,
@@ -56,6 +57,8 @@ def eval_detector(
     split: str = "test",
     limit: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    examples_path: str | Path | None = None,
+    examples: int = 12,
 ) -> dict:
     """Evaluate a detector on a gen-dataset split.
 
@@ -69,6 +72,9 @@ def eval_detector(
         split: which split.
         limit: evaluate only the first ``limit`` images.
         progress: called with (images done, total).
+        examples_path: also write a picture (JPEG or PNG, by suffix) of ``examples`` images spread
+            evenly over the split, with the true (green) and detected (cyan, TL dotted) openings.
+        examples: how many images that picture shows.
 
     Returns:
         the report: detector, images, gates, min_gate_px, precision, recall, corner_error_px
@@ -82,8 +88,9 @@ def eval_detector(
         raise ValueError(f"min_gate_px must be >= 0, got {min_gate_px}")
     detector = make_detector(detector_spec)
     data = load_split(data_dir, split, None, limit)
-    gts, preds, samples, times = [], [], [], []
+    gts, preds, samples, times, tiles = [], [], [], [], []
     n = len(data.files)
+    shown = set(np.linspace(0, n - 1, min(examples, n)).round().astype(int).tolist())
     with one_thread():
         for i, path in enumerate(data.files):
             image = read_rgb(path)
@@ -101,6 +108,8 @@ def eval_detector(
                     samples.append(_sample(g, gate, k))
             gts += g_rec
             preds += p_rec
+            if examples_path is not None and i in shown:
+                tiles.append(draw_detections(image, found, [t[0] for t in truth]))
             if progress is not None:
                 progress(i + 1, n)
     report = {
@@ -126,6 +135,17 @@ def eval_detector(
         atomic_write_json(error_model_path, model)
     report["error_model_path"] = str(error_model_path) if model and error_model_path else None
     report["error_model"] = model
+    report["examples_path"] = None
+    if examples_path is not None and tiles:
+        ext = Path(examples_path).suffix.lower() or ".jpg"
+        params = [cv2.IMWRITE_JPEG_QUALITY, 85] if ext in (".jpg", ".jpeg") else []
+        ok, data = cv2.imencode(ext, cv2.cvtColor(sheet(tiles), cv2.COLOR_RGB2BGR), params)
+        if not ok:
+            raise ValueError(
+                f"{examples_path}: cannot write an image of this type (use .jpg or .png)"
+            )
+        atomic_write_bytes(examples_path, data.tobytes())
+        report["examples_path"] = str(examples_path)
     if json_path is not None:
         atomic_write_json(json_path, report)
     return report

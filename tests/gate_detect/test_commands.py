@@ -22,10 +22,15 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
     out = tmp_path / "r.json"
     em = tmp_path / "em.json"
     r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--detector", "opencv",
-                            "--json", str(out), "--error-model", str(em)])  # fmt: skip
+                            "--json", str(out), "--error-model", str(em),
+                            "--examples", str(tmp_path / "ex.png")])  # fmt: skip
     assert r.exit_code == 0, r.output
     assert json.loads(out.read_text())["detector"] == "opencv"
     assert "distance_m" in json.loads(em.read_text())
+    import cv2
+
+    sheet = cv2.imread(str(tmp_path / "ex.png"))  # 4 test images of 160x120, drawn at 2x
+    assert sheet is not None and sheet.shape == (240, 4 * 320, 3)
 
 
 @pytest.mark.parametrize(
