@@ -35,8 +35,9 @@ def eval_detector_cmd(
     min_gate_px: float = typer.Option(20.0, help="Smallest counted gate (mean side), pixels."),
     limit: int = typer.Option(None, min=1, help="Evaluate only the first N test images."),
     examples: Path = typer.Option(
-        None, help="Also draw 12 test images with true and found gates (.jpg/.png)."
+        None, help="Also draw test images with true and found gates (.jpg/.png)."
     ),
+    num_examples: int = typer.Option(12, min=1, help="How many images --examples draws."),
 ) -> None:
     """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size.
 
@@ -58,7 +59,8 @@ def eval_detector_cmd(
             bar.update(task, completed=done)
 
         r = eval_detector(data, detector, json_path, error_model, min_gate_px, limit=limit,
-                          progress=progress, examples_path=examples)  # fmt: skip
+                          progress=progress, examples_path=examples,
+                          examples=num_examples)  # fmt: skip
     table = Table(title=f"{r['detector']} on {r['images']} images, {r['gates']} gates >= "
                   f"{r['min_gate_px']:g} px")  # fmt: skip
     for col in ("distance m", "gates", "precision", "recall", "median px", "PCK@2", "PCK@5"):
