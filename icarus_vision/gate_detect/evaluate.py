@@ -139,12 +139,12 @@ def eval_detector(
     if examples_path is not None and tiles:
         ext = Path(examples_path).suffix.lower() or ".jpg"
         params = [cv2.IMWRITE_JPEG_QUALITY, 85] if ext in (".jpg", ".jpeg") else []
-        ok, data = cv2.imencode(ext, cv2.cvtColor(sheet(tiles), cv2.COLOR_RGB2BGR), params)
+        ok, encoded = cv2.imencode(ext, cv2.cvtColor(sheet(tiles), cv2.COLOR_RGB2BGR), params)
         if not ok:
             raise ValueError(
                 f"{examples_path}: cannot write an image of this type (use .jpg or .png)"
             )
-        atomic_write_bytes(examples_path, data.tobytes())
+        atomic_write_bytes(examples_path, encoded.tobytes())
         report["examples_path"] = str(examples_path)
     if json_path is not None:
         atomic_write_json(json_path, report)

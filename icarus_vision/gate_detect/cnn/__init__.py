@@ -8,6 +8,7 @@ output; ``checkpoint.py`` saves it as safetensors + JSON. The shipped default li
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import cv2
@@ -35,6 +36,7 @@ def fuse_batchnorm(model: nn.Module) -> nn.Module:
     return model
 
 
+@functools.cache
 def native_bf16() -> bool:
     """Whether this CPU computes in bfloat16 natively (AVX512-BF16 or AMX; Linux /proc/cpuinfo)."""
     try:

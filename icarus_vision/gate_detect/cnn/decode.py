@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
+from icarus_vision.gate_detect.metrics import mean_side
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,7 @@ def nested_gates(
         per gate ``(corners (4, 2) cells, scores (4,): 0 for a fitted corner)``.
     """
     tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
-    side = float(np.abs(np.diff(tmpl[[0, 1, 2, 3, 0]])).mean())
+    side = mean_side(vectors)
     z, kind, val = peaks
     if side < 1e-3 or len(z) < NESTED_MIN_CORNERS:
         return []
@@ -150,8 +151,7 @@ def _snap(
         (corners (4, 2), scores (4,): the peak's score, 0 where nothing was near).
     """
     g = g.copy()
-    side = float(np.linalg.norm(g - np.roll(g, -1, axis=0), axis=1).mean())
-    radius = max(1.5, snap_radius * side)
+    radius = max(1.5, snap_radius * mean_side(g))
     scores = np.zeros(4)
     for k, (pos, val) in enumerate(cand):
         if len(pos):

@@ -35,7 +35,8 @@ class ModelConfig:
     image_size: tuple[int, int] = (320, 240)
     """Camera frame (width, height) the network was trained for, pixels."""
     widths: tuple[int, int, int, int] = (16, 24, 48, 64)
-    """Channels at input strides 2, 4, 8 and 16."""
+    """Channels of the four encoder stages (each halves the resolution; the first works at input
+    stride 2, or 4 after a stem)."""
     head_width: int = 24
     """Channels of the decoder at the output resolution."""
     stem_width: int = 12
