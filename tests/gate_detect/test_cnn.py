@@ -61,6 +61,16 @@ def test_a_gate_seen_through_another_is_found_though_they_share_a_centre():
         assert min(np.abs(c - (truth * 4.0 - 0.5)).max() for c, _, _ in found) < 1e-3
 
 
+def test_a_gate_whose_corners_do_not_show_is_kept_only_if_its_centre_is_sure():
+    target, _ = encode_targets([(GATE_A, VIS)], 80, 60)
+    logits = _as_logits(target)
+    logits[1:5] = -10.0  # no corner peaks: nothing confirms the regressed corners
+    logits[0] -= logits[0].max() - float(torch.logit(torch.tensor(0.7)))  # centre peak 0.7
+    assert len(decode(logits, DecodeConfig(min_snapped=3), (4.0, 4.0))) == 0
+    assert len(decode(logits, DecodeConfig(min_snapped=3, sure_centre=0.6), (4.0, 4.0))) == 1
+    assert len(decode(logits, DecodeConfig(min_snapped=3, sure_centre=0.8), (4.0, 4.0))) == 0
+
+
 def test_quad_iou():
     sq = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
     assert quad_iou(sq, sq) == pytest.approx(1.0)

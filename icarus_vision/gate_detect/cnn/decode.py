@@ -36,7 +36,10 @@ class DecodeConfig:
     """Most gates reported per image."""
     min_snapped: int = 0
     """Fewest corners that must have snapped to a corner peak for a gate to be reported (a centre
-    peak whose corners the corner maps do not confirm is usually a false alarm)."""
+    peak whose corners the corner maps do not confirm is usually a false alarm), unless its score
+    is at least ``sure_centre``."""
+    sure_centre: float = 1.0
+    """A gate scored at least this is reported however few of its corners snapped (1: never)."""
     nms_iou: float = 0.5
     """A gate whose opening overlaps a better-scored one's by more than this (intersection over
     union) is the same gate found twice, and dropped."""
@@ -206,7 +209,7 @@ def decode(
     found.sort(key=lambda f: -f[2])
     gates = []
     for g, scores, score in found:
-        if np.count_nonzero(scores) < cfg.min_snapped:
+        if np.count_nonzero(scores) < cfg.min_snapped and score < cfg.sure_centre:
             continue
         corners = g * np.asarray(scale) - 0.5
         if any(quad_iou(corners, c) > cfg.nms_iou for c, _, _ in gates):

@@ -21,7 +21,7 @@ CENTRE_THRESHOLDS = (0.2, 0.3, 0.4, 0.5)
 CORNER_THRESHOLDS = (0.1, 0.2, 0.3)
 SNAP_RADII = (0.3, 0.4)
 MIN_SNAPPED = (0, 3)
-NESTED = (False, True)
+SURE_CENTRES = (1.0, 0.6)
 
 
 def score(metrics: dict) -> float:
@@ -71,11 +71,14 @@ def tune_decode(
     """
     outputs = network_outputs(model, split)
     best = (-1.0, base, {})
-    grid = itertools.product(CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED, NESTED)
-    for c, k, r, n, nest in grid:
+    grid = itertools.product(
+        CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED, SURE_CENTRES
+    )
+    for c, k, r, n, sure in grid:
         cfg = replace(
-            base, centre_threshold=c, corner_threshold=k, snap_radius=r, min_snapped=n, nested=nest
-        )
+            base, centre_threshold=c, corner_threshold=k, snap_radius=r, min_snapped=n,
+            sure_centre=sure,
+        )  # fmt: skip
         m = metrics_of(outputs, split, cfg, min_gate_px)
         if score(m) > best[0]:
             best = (score(m), cfg, m)
