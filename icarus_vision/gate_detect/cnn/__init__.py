@@ -8,6 +8,7 @@ output; ``checkpoint.py`` saves it as safetensors + JSON. The shipped default li
 
 from __future__ import annotations
 
+import copy
 import functools
 from pathlib import Path
 
@@ -56,7 +57,7 @@ class CnnDetector(Detector):
             the detector is built. 1 by default: this small network gains nothing from more
             threads, and threads contending with other work on a busy machine can slow every
             frame down many times (switching per call costs more than the inference itself).
-        bf16: run the network in bfloat16 (autocast; it was trained that way), about 1.4x faster
+        bf16: run the network in bfloat16 (it was trained under bfloat16 autocast), about 1.6x faster
             where the CPU has bfloat16 arithmetic; None: where it has (:func:`native_bf16`).
             Decoding stays float32.
     """
@@ -71,12 +72,23 @@ class CnnDetector(Detector):
         bf16: bool | None = None,
     ) -> None:
         # Folded batch norm and channels-last memory: about 1.4x faster on a CPU core.
-        self.model = fuse_batchnorm(model.eval()).to(memory_format=torch.channels_last)
+        self._float32 = fuse_batchnorm(model.eval()).to(memory_format=torch.channels_last)
+        self._bfloat16: nn.Module | None = None
         if threads is not None and torch.get_num_threads() != threads:
             torch.set_num_threads(threads)
         self.decode_cfg = decode_cfg
         self.input_size = tuple(model.cfg.input_size)
         self.bf16 = native_bf16() if bf16 is None else bool(bf16)
+
+    @property
+    def model(self) -> nn.Module:
+        """The network that runs: a bfloat16 copy when :attr:`bf16` (weights cast once, not per
+        call as autocast would; about 0.5 ms less per frame), else the float32 one."""
+        if not self.bf16:
+            return self._float32
+        if self._bfloat16 is None:
+            self._bfloat16 = copy.deepcopy(self._float32).to(torch.bfloat16)
+        return self._bfloat16
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> CnnDetector:
@@ -96,8 +108,8 @@ class CnnDetector(Detector):
             return []
         x = torch.from_numpy(np.stack([self._prepare(im) for im in images]))
         x = x.contiguous(memory_format=torch.channels_last)
-        with torch.inference_mode(), torch.autocast("cpu", torch.bfloat16, enabled=self.bf16):
-            out = self.model(x).float()
+        with torch.inference_mode():
+            out = self.model(x.to(torch.bfloat16) if self.bf16 else x).float()
         results = []
         for im, o in zip(images, out, strict=True):
             h, w = im.shape[:2]
