@@ -229,6 +229,15 @@ def test_train_detector_writes_checkpoints_saves_on_ctrl_c_and_resumes(tiny_data
     assert (out / "model.onnx").is_file() and any((out / "tb").iterdir())
     det = make_detector(f"cnn:{out / 'best'}")
     assert isinstance(det.detect(np.zeros((120, 160, 3), np.uint8)), list)
+    # Resuming a finished run only tunes the decoding again (after the tuning grid changed).
+    first = json.loads((out / "best" / "detector.json").read_text())["training"]
+    lines = []
+    train_detector(tiny_dataset, out, epochs=2, resume=True, config=cfg, progress=False,
+                   log=lines.append)  # fmt: skip
+    again = json.loads((out / "best" / "detector.json").read_text())["training"]
+    assert len(lines) == 1 and "tuned" in lines[0]
+    assert again["epoch"] == first["epoch"]
+    assert again["val_default_decode"] == first["val_default_decode"]
 
 
 @pytest.mark.parametrize("pos", [(0.0, 0.0, 2.0), (-2.0, 0.0, 2.0), (0.5, 0.6, 2.3)])

@@ -209,11 +209,9 @@ def train_detector(
     best_model, _, meta = load_checkpoint(best_dir)
     if cfg.tune_decode:
         tuned, metrics = tune_decode(best_model, val, decode_cfg, cfg.min_gate_px)
-        info = {
-            **meta["training"],
-            "val": metrics,
-            "val_default_decode": meta["training"].get("val"),
-        }
+        done = meta["training"]  # a finished run resumed is only tuned again
+        default = done.get("val_default_decode", done.get("val"))
+        info = {**done, "val": metrics, "val_default_decode": default}
         save_checkpoint(best_dir, best_model, tuned, info)
         best = (best[0], best[1], metrics)
         if log is not None:
