@@ -34,7 +34,7 @@ class ModelConfig:
     """Network input (width, height), pixels; frames are resized to it (INTER_AREA)."""
     image_size: tuple[int, int] = (320, 240)
     """Camera frame (width, height) the network was trained for, pixels."""
-    widths: tuple[int, int, int, int] = (16, 24, 48, 64)
+    widths: tuple[int, int, int, int] = (16, 32, 64, 128)
     """Channels of the four encoder stages (each halves the resolution; the first works at input
     stride 2, or 4 after a stem)."""
     head_width: int = 24
