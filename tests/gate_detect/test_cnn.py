@@ -61,6 +61,18 @@ def test_a_gate_seen_through_another_is_found_though_they_share_a_centre():
         assert min(np.abs(c - (truth * 4.0 - 0.5)).max() for c, _, _ in found) < 1e-3
 
 
+def test_a_nested_gate_of_another_shape_needs_a_looser_fit():
+    far = (GATE_A - GATE_A.mean(axis=0)) * 0.4 + GATE_A.mean(axis=0) + (0.1, 0.05)
+    far[1] += (1.5, 0.0)  # seen from another angle: TR and BL pulled apart
+    far[3] -= (1.5, 0.0)
+    target, _ = encode_targets([(GATE_A, VIS), (far, VIS)], 80, 60)
+    logits = _as_logits(target)
+    assert len(decode(logits, DecodeConfig(nested_residual=0.05), (4.0, 4.0))) == 1
+    found = decode(logits, DecodeConfig(nested_residual=0.08), (4.0, 4.0))
+    assert len(found) == 2
+    assert min(np.abs(c - (far * 4.0 - 0.5)).max() for c, _, _ in found) < 1e-3
+
+
 def test_a_gate_whose_corners_do_not_show_is_kept_only_if_its_centre_is_sure():
     target, _ = encode_targets([(GATE_A, VIS)], 80, 60)
     logits = _as_logits(target)

@@ -45,14 +45,14 @@ class DecodeConfig:
     union) is the same gate found twice, and dropped."""
     nested: bool = True
     """Look for gates nested in (or around) each regressed one (module docstring)."""
+    nested_residual: float = 0.05
+    """Largest RMS misfit of a nested gate's corners to the regressed shape, relative to its size."""
 
 
 NESTED_SCALE = (0.15, 6.0)
 """Scales, relative to the regressed gate, searched for nested gates."""
 NESTED_MAX_TURN = np.radians(12.0)
 """Largest in-image rotation of a nested gate relative to the regressed one, radians."""
-NESTED_MAX_RESIDUAL = 0.05
-"""Largest RMS misfit of a nested gate's corners to the regressed shape, relative to its size."""
 NESTED_MAX_OFFSET = 0.3
 """Largest distance from the centre peak to a nested gate's centre, relative to its mean side."""
 NESTED_MIN_CORNERS = 3
@@ -72,13 +72,16 @@ def _peaks(heat: np.ndarray, threshold: float) -> np.ndarray:
 
 
 def nested_gates(
-    centre: np.ndarray, vectors: np.ndarray, peaks: tuple[np.ndarray, np.ndarray, np.ndarray]
+    centre: np.ndarray,
+    vectors: np.ndarray,
+    peaks: tuple[np.ndarray, np.ndarray, np.ndarray],
+    max_residual: float = 0.05,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Other gates around one centre peak: corner peaks shaped like the regressed gate.
 
     Every choice of one peak (or none) per corner type, with at least three peaks, is fitted to
     the regressed shape by a similarity transform (scale, rotation, shift; least squares). A
-    choice is a gate when the fit is close (``NESTED_MAX_RESIDUAL``), barely rotated, at another
+    choice is a gate when the fit is close (``max_residual``), barely rotated, at another
     scale within ``NESTED_SCALE`` and centred near the peak; a missing corner comes from the fit.
 
     Args:
@@ -86,6 +89,8 @@ def nested_gates(
         vectors: (4, 2) regressed centre-to-corner vectors, cells.
         peaks: every corner peak: positions (N,) complex x + iy, cells; types (N,) int 0-3;
             scores (N,).
+        max_residual: largest RMS misfit of the corners to the regressed shape, relative to
+            the gate's size.
 
     Returns:
         per gate ``(corners (4, 2) cells, scores (4,): 0 for a fitted corner)``.
@@ -132,7 +137,7 @@ def nested_gates(
     resid = np.sqrt((np.where(have, np.abs(fit - q), 0) ** 2).sum(axis=1) / n) / (scale * side)
     offset = np.abs(fit.mean(axis=1) - c0) / (scale * side)
     ok = (
-        (resid < NESTED_MAX_RESIDUAL)
+        (resid < max_residual)
         & (np.abs(np.angle(a)) < NESTED_MAX_TURN)
         & (scale > NESTED_SCALE[0])
         & (scale < NESTED_SCALE[1])
@@ -204,7 +209,8 @@ def decode(
         if any(quad_iou(g, p) > cfg.nms_iou for p in primaries):
             continue  # a weaker peak of a gate already searched around
         primaries.append(g)
-        for g, scores in nested_gates(centre, vectors, peaks) if cfg.nested else ():
+        nested = nested_gates(centre, vectors, peaks, cfg.nested_residual) if cfg.nested else ()
+        for g, scores in nested:
             found.append((g, scores, score * float(scores.mean())))
     found.sort(key=lambda f: -f[2])
     gates = []

@@ -22,6 +22,7 @@ CORNER_THRESHOLDS = (0.1, 0.2, 0.3)
 SNAP_RADII = (0.3, 0.4)
 MIN_SNAPPED = (0, 3)
 SURE_CENTRES = (1.0, 0.6)
+NESTED_RESIDUALS = (0.05, 0.08)
 
 
 def score(metrics: dict) -> float:
@@ -72,12 +73,13 @@ def tune_decode(
     outputs = network_outputs(model, split)
     best = (-1.0, base, {})
     grid = itertools.product(
-        CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED, SURE_CENTRES
-    )
-    for c, k, r, n, sure in grid:
+        CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED, SURE_CENTRES,
+        NESTED_RESIDUALS,
+    )  # fmt: skip
+    for c, k, r, n, sure, fit in grid:
         cfg = replace(
             base, centre_threshold=c, corner_threshold=k, snap_radius=r, min_snapped=n,
-            sure_centre=sure,
+            sure_centre=sure, nested_residual=fit,
         )  # fmt: skip
         m = metrics_of(outputs, split, cfg, min_gate_px)
         if score(m) > best[0]:
