@@ -57,9 +57,9 @@ class CnnDetector(Detector):
             the detector is built. 1 by default: this small network gains nothing from more
             threads, and threads contending with other work on a busy machine can slow every
             frame down many times (switching per call costs more than the inference itself).
-        bf16: run the network in bfloat16 (it was trained under bfloat16 autocast), about 1.6x faster
-            where the CPU has bfloat16 arithmetic; None: where it has (:func:`native_bf16`).
-            Decoding stays float32.
+        bf16: run the network in bfloat16 (it was trained under bfloat16 autocast), about 1.5x
+            faster where the CPU has bfloat16 arithmetic; None: where it has
+            (:func:`native_bf16`). Decoding stays float32.
     """
 
     name = "cnn"
@@ -83,7 +83,7 @@ class CnnDetector(Detector):
     @property
     def model(self) -> nn.Module:
         """The network that runs: a bfloat16 copy when :attr:`bf16` (weights cast once, not per
-        call as autocast would; about 0.5 ms less per frame), else the float32 one."""
+        call as autocast would; about 0.3 ms less per frame), else the float32 one."""
         if not self.bf16:
             return self._float32
         if self._bfloat16 is None:
