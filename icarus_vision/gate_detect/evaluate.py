@@ -86,6 +86,9 @@ def eval_detector(
     """
     if min_gate_px < 0:
         raise ValueError(f"min_gate_px must be >= 0, got {min_gate_px}")
+    ext = (Path(examples_path).suffix.lower() or ".jpg") if examples_path is not None else None
+    if ext is not None and not cv2.haveImageWriter(f"examples{ext}"):
+        raise ValueError(f"{examples_path}: cannot write an image of this type (use .jpg or .png)")
     detector = make_detector(detector_spec)
     data = load_split(data_dir, split, None, limit)
     gts, preds, samples, times, tiles = [], [], [], [], []
@@ -137,7 +140,6 @@ def eval_detector(
     report["error_model"] = model
     report["examples_path"] = None
     if examples_path is not None and tiles:
-        ext = Path(examples_path).suffix.lower() or ".jpg"
         params = [cv2.IMWRITE_JPEG_QUALITY, 85] if ext in (".jpg", ".jpeg") else []
         ok, encoded = cv2.imencode(ext, cv2.cvtColor(sheet(tiles), cv2.COLOR_RGB2BGR), params)
         if not ok:

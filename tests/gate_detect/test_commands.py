@@ -38,6 +38,10 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
     [
         (["eval-detector", "--data", "{tmp}/missing", "--detector", "opencv"], "missing"),
         (["eval-detector", "--data", "{data}", "--detector", "nosuch"], "nosuch"),
+        (  # refused before any evaluation (the data folder is not even looked at)
+            ["eval-detector", "--data", "{tmp}/missing", "--examples", "{tmp}/ex.xyz"],
+            "cannot write an image of this type",
+        ),
         (["eval-detector", "--data", "{data}", "--detector", "cnn:{tmp}/none.safetensors"], "none"),
         (["train-detector", "--data", "{tmp}/missing", "--out", "{tmp}/o"], "missing"),
         (
