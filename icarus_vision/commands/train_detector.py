@@ -17,7 +17,15 @@ def train_detector_cmd(
     out: Path = typer.Option(..., help="Output folder: best/, last/, model.onnx, tb/."),
     epochs: int = typer.Option(12, min=1, help="Total epochs (a resumed run continues to this)."),
     seed: int = typer.Option(0, help="Random seed (weights, shuffling, augmentation)."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT/last."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the run in OUT/last with its own settings."
+    ),
+    ignore_below_px: float = typer.Option(
+        0.0,
+        min=0.0,
+        help="Gates smaller than this (mean side of the opening, px) are not training targets "
+        "and a detection near one is not penalised (0: all gates are targets).",
+    ),
 ) -> None:
     """Train the corner network with augmentation; validate every epoch.
 
@@ -25,11 +33,12 @@ def train_detector_cmd(
     weights), OUT/history.json and TensorBoard logs in OUT/tb. Ctrl-C saves OUT/last; --resume
     continues from it. Use the result with --detector cnn:OUT/best.
     """
-    from icarus_vision.gate_detect.cnn.train import train_detector
+    from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
 
     result = train_detector(
-        data, out, epochs=epochs, seed=seed, resume=resume, log=lambda s: console.print(s)
-    )
+        data, out, epochs=epochs, seed=seed, resume=resume,
+        config=TrainConfig(ignore_below_px=ignore_below_px), log=lambda s: console.print(s),
+    )  # fmt: skip
     m = result.best_metrics
     console.print(
         f"best epoch {result.best_epoch}: precision {m.get('precision')}, recall "

@@ -15,7 +15,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoin
 from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, mirror
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, quad_iou
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
-from icarus_vision.gate_detect.cnn.targets import detection_loss, encode_targets
+from icarus_vision.gate_detect.cnn.targets import detection_loss, encode_targets, focal_loss
 from tests.gate_detect.conftest import TINY_MODEL
 
 GATE_A = np.array([[30.3, 20.6], [52.2, 21.4], [51.7, 44.9], [29.1, 43.2]])  # grid units
@@ -81,6 +81,28 @@ def test_a_gate_whose_corners_do_not_show_is_kept_only_if_its_centre_is_sure():
     assert len(decode(logits, DecodeConfig(min_snapped=3), (4.0, 4.0))) == 0
     assert len(decode(logits, DecodeConfig(min_snapped=3, sure_centre=0.6), (4.0, 4.0))) == 1
     assert len(decode(logits, DecodeConfig(min_snapped=3, sure_centre=0.8), (4.0, 4.0))) == 0
+
+
+def test_small_gates_can_be_ignored_rather_than_learned():
+    small = GATE_B * 0.5 + (20.0, 5.0)  # mean side about 3.2 cells
+    target, weight = encode_targets([(GATE_A, VIS), (small, VIS)], 80, 60, ignore_below=4.0)
+    assert (target[1:5] == 1.0).sum() == 4 and (target[0] == 1.0).sum() == 1  # GATE_A only
+    x0, y0 = np.floor(small.min(axis=0)).astype(int)
+    x1, y1 = np.floor(small.max(axis=0)).astype(int)
+    assert weight[2, y0 - 1 : y1 + 2, x0 - 1 : x1 + 2].min() == 1.0
+    assert weight[2].sum() == (x1 - x0 + 3) * (y1 - y0 + 3)
+    # A peak over the ignored gate costs nothing; the same peak elsewhere does.
+    quiet = torch.full((1, 1, 60, 80), -9.0)
+    t = torch.from_numpy(target[None, 1:2])
+    ign = torch.from_numpy(weight[None, 2:3])
+    base = focal_loss(quiet, t, ign)
+    over_small, elsewhere = quiet.clone(), quiet.clone()
+    over_small[..., int(small[0, 1]), int(small[0, 0])] = 3.0
+    elsewhere[..., 50, 70] = 3.0
+    assert float(focal_loss(over_small, t, ign)) == pytest.approx(float(base), rel=1e-6)
+    assert float(focal_loss(elsewhere, t, ign)) > float(base) + 1.0
+    no_ignore, _ = encode_targets([(GATE_A, VIS), (small, VIS)], 80, 60)
+    assert (no_ignore[1:5] == 1.0).sum() == 8
 
 
 def test_quad_iou():
@@ -220,7 +242,7 @@ def test_train_detector_writes_checkpoints_saves_on_ctrl_c_and_resumes(tiny_data
     from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
 
     out = tmp_path / "run"
-    cfg = TrainConfig(batch_size=4, bf16=False)
+    cfg = TrainConfig(batch_size=4, bf16=False, ignore_below_px=5.0)
 
     def interrupt(line: str) -> None:
         raise KeyboardInterrupt
@@ -234,8 +256,10 @@ def test_train_detector_writes_checkpoints_saves_on_ctrl_c_and_resumes(tiny_data
     with pytest.raises(ValueError, match="--resume"):
         train_detector(tiny_dataset, out, epochs=2, config=cfg, progress=False)
     lines = []
-    r = train_detector(tiny_dataset, out, epochs=2, resume=True, config=cfg, progress=False,
-                       log=lines.append)  # fmt: skip
+    r = train_detector(tiny_dataset, out, epochs=2, resume=True, config=TrainConfig(),
+                       progress=False, log=lines.append)  # fmt: skip
+    stored = json.loads((out / "last" / "detector.json").read_text())["training"]["config"]
+    assert stored["ignore_below_px"] == 5.0 and stored["batch_size"] == 4  # the run's own settings
     assert r.epochs_done == 2 and lines[0].startswith("epoch 2") and "tuned" in lines[1]
     assert [h["epoch"] for h in json.loads((out / "history.json").read_text())] == [1, 2]
     assert (out / "model.onnx").is_file() and any((out / "tb").iterdir())

@@ -132,12 +132,22 @@ class GateDataset(Dataset):
         grid: (w, h) of the network output, cells.
         augment: apply the training augmentation (else the image as is).
         seed: seed of the augmentation.
+        ignore_below_px: gates whose opening's mean side is shorter than this (camera pixels)
+            are no targets, and no peak near them is penalised (``encode_targets``).
     """
 
-    def __init__(self, split: Split, grid: tuple[int, int], augment: bool, seed: int = 0) -> None:
+    def __init__(
+        self,
+        split: Split,
+        grid: tuple[int, int],
+        augment: bool,
+        seed: int = 0,
+        ignore_below_px: float = 0.0,
+    ) -> None:
         from icarus_vision.gate_detect.cnn.targets import encode_targets
 
         self.split, self.grid, self.encode = split, grid, encode_targets
+        self.ignore_below = ignore_below_px * grid[0] / split.image_size[0]  # grid cells
         self.augment = make_augment(seed) if augment else None
         self.rng = np.random.default_rng(seed)
 
@@ -166,7 +176,7 @@ class GateDataset(Dataset):
             vis = np.where(inside, vis, 0)
         gx, gy = self.grid[0] / w, self.grid[1] / h
         items = [(k * (gx, gy), v) for k, v in zip(kps, vis, strict=True)]
-        target, weight = self.encode(items, *self.grid)
+        target, weight = self.encode(items, *self.grid, ignore_below=self.ignore_below)
         x = np.ascontiguousarray(img.transpose(2, 0, 1), dtype=np.float32) / 255.0
         return x, target, weight
 

@@ -14,6 +14,8 @@ import torch
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
 
 CENTRE, CORNERS, OFFSET, VECTORS = 0, slice(1, 5), slice(5, 7), slice(7, 15)
+IGNORE = 2
+"""Channel of the ignore map in the weights."""
 
 
 def _gaussian(hm: np.ndarray, cx: int, cy: int, sigma: float) -> None:
@@ -30,7 +32,7 @@ def _gaussian(hm: np.ndarray, cx: int, cy: int, sigma: float) -> None:
 
 
 def encode_targets(
-    gates: list[tuple[np.ndarray, np.ndarray]], grid_w: int, grid_h: int
+    gates: list[tuple[np.ndarray, np.ndarray]], grid_w: int, grid_h: int, ignore_below: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """Targets of one image.
 
@@ -38,10 +40,13 @@ def encode_targets(
         gates: per gate ``(g, vis)``: g (4, 2) corners in grid units (TL, TR, BR, BL; NaN when
             unknown), vis (4,) COCO visibility after augmentation (2 visible, 1 hidden, 0 outside).
         grid_w, grid_h: output grid size, cells.
+        ignore_below: a gate whose opening's mean side is shorter than this (cells) is no target:
+            its bounding box, grown by a cell, is marked in the ignore map instead, where the
+            heatmap loss neither asks for nor penalises a peak.
 
     Returns:
         target: (15, H, W) float32 (channel layout of the network output).
-        weight: (3, H, W) float32 regression weights: offsets, vectors, spare (zeros).
+        weight: (3, H, W) float32: offset and vector regression weights, ignore map (0 or 1).
     """
     t = np.zeros((15, grid_h, grid_w), np.float32)
     wt = np.zeros((3, grid_h, grid_w), np.float32)
@@ -50,6 +55,11 @@ def encode_targets(
         side = np.nan
         if finite.all():
             side = float(np.linalg.norm(g - np.roll(g, -1, axis=0), axis=1).mean())
+            if side < ignore_below:
+                x0, y0 = np.floor(g.min(axis=0)).astype(int) - 1
+                x1, y1 = np.floor(g.max(axis=0)).astype(int) + 2
+                wt[IGNORE, max(y0, 0) : max(y1, 0), max(x0, 0) : max(x1, 0)] = 1.0
+                continue
         for k in range(4):
             if vis[k] != 2 or not finite[k]:
                 continue
@@ -82,11 +92,17 @@ def encode_targets(
     return t, wt
 
 
-def focal_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """CenterNet's penalty-reduced focal loss, summed, divided by the number of peaks."""
+def focal_loss(
+    logits: torch.Tensor, target: torch.Tensor, ignore: torch.Tensor | None = None
+) -> torch.Tensor:
+    """CenterNet's penalty-reduced focal loss, summed, divided by the number of peaks.
+
+    ``ignore`` (broadcastable to ``target``, 1 = ignored) removes the penalty of a peak there."""
     p = torch.sigmoid(logits).clamp(1e-4, 1 - 1e-4)
     pos = target.eq(1).float()
     neg_w = (1 - target) ** 4
+    if ignore is not None:
+        neg_w = neg_w * (1 - ignore)
     pos_loss = torch.log(p) * (1 - p) ** 2 * pos
     neg_loss = torch.log(1 - p) * p**2 * neg_w * (1 - pos)
     return -(pos_loss.sum() + neg_loss.sum()) / pos.sum().clamp(min=1.0)
@@ -94,8 +110,9 @@ def focal_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 def detection_loss(out: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> dict:
     """Loss terms of a batch: (B, 15, H, W) output and target, (B, 3, H, W) weights."""
-    centre = focal_loss(out[:, CENTRE], target[:, CENTRE])
-    corners = focal_loss(out[:, CORNERS], target[:, CORNERS])
+    ignore = weight[:, IGNORE : IGNORE + 1]
+    centre = focal_loss(out[:, CENTRE], target[:, CENTRE], ignore[:, 0])
+    corners = focal_loss(out[:, CORNERS], target[:, CORNERS], ignore)
     w_off, w_vec = weight[:, 0:1], weight[:, 1:2]
     offset = (w_off * (out[:, OFFSET] - target[:, OFFSET]).abs()).sum() / w_off.sum().clamp(min=1)
     vectors = (w_vec * (out[:, VECTORS] - target[:, VECTORS]).abs()).sum()

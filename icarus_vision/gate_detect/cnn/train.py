@@ -19,7 +19,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +56,9 @@ class TrainConfig:
     """Use only the first ``limit`` images of each split (quick runs and tests)."""
     min_gate_px: float = 20.0
     """Smallest gate counted in the validation metrics, pixels."""
+    ignore_below_px: float = 0.0
+    """Gates whose opening's mean side is shorter than this (pixels) are no training targets, and
+    a peak near one is not penalised (0: every gate is a target)."""
     tune_decode: bool = True
     """After training, choose the best weights' decoding thresholds on the val split."""
     bf16: bool = True
@@ -92,8 +95,9 @@ def train_detector(
         out_dir: output folder (layout in the module docstring).
         epochs: total epochs (a resumed run continues up to this number).
         seed: seed of weights, shuffling and augmentation.
-        resume: continue from ``OUT/last``; without it an existing ``OUT/last`` is an error.
-        config: further settings (``epochs`` and ``seed`` above take precedence).
+        resume: continue from ``OUT/last`` with the run's own settings (only ``epochs`` may
+            change); without it an existing ``OUT/last`` is an error.
+        config: further settings of a new run (``epochs`` and ``seed`` above take precedence).
         model_config: architecture of a new network.
         progress: show a rich progress bar.
         log: called with one line per epoch.
@@ -117,8 +121,11 @@ def train_detector(
     mcfg = model_config or ModelConfig()
     model = CornerNet(mcfg)
     if resume:
-        model, _, _ = load_checkpoint(last_dir)
+        model, _, meta = load_checkpoint(last_dir)
         mcfg = model.cfg
+        stored = meta.get("training", {}).get("config", {})
+        known = {f.name for f in fields(TrainConfig)}
+        cfg = replace(TrainConfig(**{k: v for k, v in stored.items() if k in known}), epochs=epochs)
     train = load_split(data_dir, "train", mcfg.input_size, cfg.limit)
     val = load_split(data_dir, "val", mcfg.input_size, cfg.limit)
     grid = mcfg.grid
@@ -138,7 +145,9 @@ def train_detector(
         start, history = int(st["epoch"]), json.loads(st["history"])
         best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
     gen = torch.Generator().manual_seed(cfg.seed + start)
-    ds = GateDataset(train, grid, augment=True, seed=cfg.seed + start)
+    ds = GateDataset(
+        train, grid, augment=True, seed=cfg.seed + start, ignore_below_px=cfg.ignore_below_px
+    )
     loader = DataLoader(ds, cfg.batch_size, shuffle=True, generator=gen, drop_last=False)
     from torch.utils.tensorboard import SummaryWriter
 
