@@ -16,6 +16,7 @@ from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, mirror
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, quad_iou
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.targets import detection_loss, encode_targets, focal_loss
+from icarus_vision.gate_detect.cnn.tune import choose
 from tests.gate_detect.conftest import TINY_MODEL
 
 GATE_A = np.array([[30.3, 20.6], [52.2, 21.4], [51.7, 44.9], [29.1, 43.2]])  # grid units
@@ -103,6 +104,19 @@ def test_small_gates_can_be_ignored_rather_than_learned():
     assert float(focal_loss(elsewhere, t, ign)) > float(base) + 1.0
     no_ignore, _ = encode_targets([(GATE_A, VIS), (small, VIS)], 80, 60)
     assert (no_ignore[1:5] == 1.0).sum() == 8
+
+
+def test_decode_tuning_prefers_fewer_detections_among_equal_scores():
+    def metrics(precision: float, recall: float, detections: int) -> dict:
+        pck = {"5px": 0.9, "2px": 0.7}
+        return {"precision": precision, "recall": recall, "pck": pck, "detections": detections}
+
+    low, mid, high = (DecodeConfig(centre_threshold=c) for c in (0.2, 0.3, 0.5))
+    best = (low, metrics(0.90, 0.95, 120))  # score 0.8625
+    tie = (mid, metrics(0.91, 0.9396, 110))  # 0.8624: within SCORE_TIE, fewer detections
+    worse = (high, metrics(0.95, 0.85, 80))  # 0.85: fewest detections, but worse
+    assert choose([best, tie, worse])[0] is mid
+    assert choose([best, worse])[0] is low
 
 
 def test_quad_iou():

@@ -1,7 +1,9 @@
 """Validation of the corner network, and the choice of its decoding thresholds on the val split.
 
 The network runs once over the split; decoding (cheap) is then repeated for each candidate
-:class:`DecodeConfig`, and the one with the best validation score is kept.
+:class:`DecodeConfig`. Of those within ``SCORE_TIE`` of the best validation score, the one that
+reports the fewest detections is kept: thresholds that score the same on val then lean towards
+precision, and decoding fewer peaks is faster.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ SNAP_RADII = (0.3, 0.4)
 MIN_SNAPPED = (0, 3)
 SURE_CENTRES = (1.0, 0.6)
 NESTED_RESIDUALS = (0.05, 0.08)
+SCORE_TIE = 0.001
+"""Validation scores this close to the best count as equally good."""
 
 
 def score(metrics: dict) -> float:
@@ -54,7 +58,7 @@ def metrics_of(outputs: torch.Tensor, split: Split, cfg: DecodeConfig, min_gate_
         g_rec, p_rec = evaluate_image([(c, s) for c, _, s in found], truth, min_gate_px)
         gts += g_rec
         preds += p_rec
-    return summarize(gts, preds, min_gate_px)
+    return {**summarize(gts, preds, min_gate_px), "detections": len(preds)}
 
 
 def validate(model: CornerNet, split: Split, cfg: DecodeConfig, min_gate_px: float) -> dict:
@@ -65,13 +69,14 @@ def validate(model: CornerNet, split: Split, cfg: DecodeConfig, min_gate_px: flo
 def tune_decode(
     model: CornerNet, split: Split, base: DecodeConfig, min_gate_px: float
 ) -> tuple[DecodeConfig, dict]:
-    """The decoding thresholds (grid above) with the best :func:`score` on ``split``.
+    """The decoding thresholds (grid above) with the best :func:`score` on ``split`` (ties:
+    module docstring).
 
     Returns:
         (best config, its metrics).
     """
     outputs = network_outputs(model, split)
-    best = (-1.0, base, {})
+    tried = []
     grid = itertools.product(
         CENTRE_THRESHOLDS, CORNER_THRESHOLDS, SNAP_RADII, MIN_SNAPPED, SURE_CENTRES,
         NESTED_RESIDUALS,
@@ -81,7 +86,14 @@ def tune_decode(
             base, centre_threshold=c, corner_threshold=k, snap_radius=r, min_snapped=n,
             sure_centre=sure, nested_residual=fit,
         )  # fmt: skip
-        m = metrics_of(outputs, split, cfg, min_gate_px)
-        if score(m) > best[0]:
-            best = (score(m), cfg, m)
-    return best[1], best[2]
+        tried.append((cfg, metrics_of(outputs, split, cfg, min_gate_px)))
+    return choose(tried)
+
+
+def choose(tried: list[tuple[DecodeConfig, dict]]) -> tuple[DecodeConfig, dict]:
+    """Of (config, metrics) pairs, the one with the fewest ``detections`` among those whose
+    :func:`score` is within ``SCORE_TIE`` of the best (then the higher score, then the first)."""
+    top = max(score(m) for _, m in tried)
+    near = [(m["detections"], -score(m), i) for i, (_, m) in enumerate(tried)
+            if score(m) >= top - SCORE_TIE]  # fmt: skip
+    return tried[min(near)[2]]
