@@ -75,7 +75,7 @@ def nested_gates(
     centre: np.ndarray,
     vectors: np.ndarray,
     peaks: tuple[np.ndarray, np.ndarray, np.ndarray],
-    max_residual: float = 0.05,
+    max_residual: float = DecodeConfig.nested_residual,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Other gates around one centre peak: corner peaks shaped like the regressed gate.
 

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
+from icarus_vision.gate_detect.metrics import mean_side
 
 CENTRE, CORNERS, OFFSET, VECTORS = 0, slice(1, 5), slice(5, 7), slice(7, 15)
 IGNORE = 2
@@ -54,7 +55,7 @@ def encode_targets(
         finite = np.isfinite(g).all(axis=1)
         side = np.nan
         if finite.all():
-            side = float(np.linalg.norm(g - np.roll(g, -1, axis=0), axis=1).mean())
+            side = mean_side(g)
             if side < ignore_below:
                 x0, y0 = np.floor(g.min(axis=0)).astype(int) - 1
                 x1, y1 = np.floor(g.max(axis=0)).astype(int) + 2
