@@ -151,6 +151,11 @@ class GateDataset(Dataset):
         self.augment = make_augment(seed) if augment else None
         self.rng = np.random.default_rng(seed)
 
+    def reseed(self, seed: int) -> None:
+        """Restart the augmentation's random streams from ``seed``."""
+        self.augment = make_augment(seed) if self.augment is not None else None
+        self.rng = np.random.default_rng(seed)
+
     def __len__(self) -> int:
         return len(self.split.files)
 

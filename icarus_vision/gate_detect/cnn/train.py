@@ -10,7 +10,8 @@ Output folder layout::
     OUT/tb/      TensorBoard logs
 
 Every file is written atomically. Ctrl-C saves ``last/`` (the interrupted epoch is redone on
-resume) and re-raises ``KeyboardInterrupt``.
+resume) and re-raises ``KeyboardInterrupt``. Each epoch's shuffle and augmentation are seeded by
+(seed, epoch) alone, so a resumed run trains on the same samples as one never interrupted.
 """
 
 from __future__ import annotations
@@ -144,10 +145,8 @@ def train_detector(
         sched.load_state_dict(st["scheduler"])
         start, history = int(st["epoch"]), json.loads(st["history"])
         best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
-    gen = torch.Generator().manual_seed(cfg.seed + start)
-    ds = GateDataset(
-        train, grid, augment=True, seed=cfg.seed + start, ignore_below_px=cfg.ignore_below_px
-    )
+    gen = torch.Generator()
+    ds = GateDataset(train, grid, augment=True, seed=cfg.seed, ignore_below_px=cfg.ignore_below_px)
     loader = DataLoader(ds, cfg.batch_size, shuffle=True, generator=gen, drop_last=False)
     from torch.utils.tensorboard import SummaryWriter
 
@@ -170,6 +169,11 @@ def train_detector(
             bar.start()
         for epoch in range(start, cfg.epochs):
             model.train()
+            # Each epoch's shuffle and augmentation depend only on (seed, epoch): a resumed run
+            # sees the same data as one never interrupted.
+            epoch_seed = int(np.random.SeedSequence([cfg.seed, epoch]).generate_state(1)[0])
+            gen.manual_seed(epoch_seed)
+            ds.reseed(epoch_seed)
             task = (
                 bar.add_task(
                     f"epoch {epoch + 1}/{cfg.epochs}", total=steps_per_epoch, loss=float("nan")
