@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import typer
@@ -26,17 +27,32 @@ def train_detector_cmd(
         help="Gates smaller than this (mean side of the opening, px) are not training targets "
         "and a detection near one is not penalised (0: all gates are targets).",
     ),
+    widths: str | None = typer.Option(
+        None,
+        help="Channels of the four encoder stages of a new network, comma-separated "
+        "[default: 16,32,64,128].",
+    ),
+    head_width: int | None = typer.Option(
+        None, min=1, help="Channels of a new network's decoder head [default: 24]."
+    ),
 ) -> None:
     """Train the corner network with augmentation; validate every epoch.
 
     Writes OUT/best and OUT/last (model.safetensors + detector.json), OUT/model.onnx (best
     weights), OUT/history.json and TensorBoard logs in OUT/tb. Ctrl-C saves OUT/last; --resume
-    continues from it. Use the result with --detector cnn:OUT/best.
+    continues from it (with the run's own settings and network). Use the result with
+    --detector cnn:OUT/best.
     """
+    from icarus_vision.gate_detect.cnn.model import ModelConfig
     from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
 
+    model = ModelConfig()
+    if widths is not None:
+        model = replace(model, widths=_widths(widths))
+    if head_width is not None:
+        model = replace(model, head_width=head_width)
     result = train_detector(
-        data, out, epochs=epochs, seed=seed, resume=resume,
+        data, out, epochs=epochs, seed=seed, resume=resume, model_config=model,
         config=TrainConfig(ignore_below_px=ignore_below_px), log=lambda s: console.print(s),
     )  # fmt: skip
     m = result.best_metrics
@@ -46,3 +62,16 @@ def train_detector_cmd(
         highlight=False,
     )
     console.print(f"checkpoints written to {escape(str(out))}/ (best/, last/, model.onnx)")
+
+
+def _widths(text: str) -> tuple[int, int, int, int]:
+    """``--widths``: four positive channel counts, comma-separated."""
+    try:
+        w = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        w = ()
+    if len(w) != 4 or min(w) < 1:
+        raise ValueError(
+            f"--widths: expected four positive integers like 16,32,64,128, got {text!r}"
+        )
+    return w  # type: ignore[return-value]

@@ -48,6 +48,11 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
             ["train-detector", "--data", "{data}", "--out", "{tmp}/o", "--resume"],
             "nothing to resume",
         ),
+        (
+            ["train-detector", "--data", "{data}", "--out", "{tmp}/o", "--widths", "16,32"],
+            "--widths",
+        ),
+        (["train-detector", "--data", "{data}", "--out", "{tmp}/o", "--widths", "a,b,c,d"], "a,b"),
     ],
 )
 def test_errors_are_one_line(tiny_dataset, tmp_path, args, needle):
@@ -56,3 +61,12 @@ def test_errors_are_one_line(tiny_dataset, tmp_path, args, needle):
     assert r.exit_code == 1
     lines = [s for s in r.output.strip().splitlines() if s.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], r.output
+
+
+def test_train_detector_builds_the_network_asked_for(tiny_dataset, tmp_path):
+    out = tmp_path / "run"
+    r = runner.invoke(app, ["train-detector", "--data", str(tiny_dataset), "--out", str(out),
+                            "--epochs", "1", "--widths", "4,8,8,16", "--head-width", "8"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    model = json.loads((out / "best" / "detector.json").read_text())["model"]
+    assert model["widths"] == [4, 8, 8, 16] and model["head_width"] == 8
