@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import pytest
+import typer
 from typer.testing import CliRunner
 
 from icarus_vision.cli import app
@@ -70,3 +71,14 @@ def test_train_detector_builds_the_network_asked_for(tiny_dataset, tmp_path):
     assert r.exit_code == 0, r.output
     model = json.loads((out / "best" / "detector.json").read_text())["model"]
     assert model["widths"] == [4, 8, 8, 16] and model["head_width"] == 8
+
+
+def test_train_detector_help_states_the_model_defaults():
+    """--widths and --head-width print their defaults as literals (to keep torch out of CLI start);
+    they must follow ModelConfig."""
+    from icarus_vision.gate_detect.cnn.model import ModelConfig
+
+    params = {p.name: p for p in typer.main.get_command(app).commands["train-detector"].params}
+    default = ModelConfig()
+    assert f"[default: {','.join(map(str, default.widths))}]" in params["widths"].help
+    assert f"[default: {default.head_width}]" in params["head_width"].help
