@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import warnings
 from pathlib import Path
 
 import cv2
@@ -37,6 +38,23 @@ def fuse_batchnorm(model: nn.Module) -> nn.Module:
     return model
 
 
+def frozen_trace(model: nn.Module, example: torch.Tensor) -> nn.Module:
+    """``model`` traced on ``example`` (B, 3, H, W) and frozen by TorchScript, or ``model`` itself
+    if that fails.
+
+    Freezing makes the weights constants of one graph, run without the Python calls of the
+    modules: the outputs are identical, and the shipped network runs about 0.25 ms per frame
+    faster on one core. TorchScript is deprecated in favour of ``torch.compile``, which needs a
+    C++ compiler and tens of seconds at start-up; with torch pinned, tracing stays the cheaper way.
+    """
+    try:
+        with warnings.catch_warnings(), torch.no_grad():
+            warnings.simplefilter("ignore")
+            return torch.jit.freeze(torch.jit.trace(model.eval(), example))
+    except Exception:  # noqa: BLE001 - any tracing failure: run the module as it is
+        return model
+
+
 @functools.cache
 def native_bf16() -> bool:
     """Whether this CPU computes in bfloat16 natively (AVX512-BF16 or AMX; Linux /proc/cpuinfo)."""
@@ -60,6 +78,8 @@ class CnnDetector(Detector):
         bf16: run the network in bfloat16 (it was trained under bfloat16 autocast), about 1.5x
             faster where the CPU has bfloat16 arithmetic; None: where it has
             (:func:`native_bf16`). Decoding stays float32.
+        frozen: run a TorchScript-frozen trace of the network (:func:`frozen_trace`): the same
+            output, about 0.25 ms less per frame.
     """
 
     name = "cnn"
@@ -70,25 +90,33 @@ class CnnDetector(Detector):
         decode_cfg: DecodeConfig = DecodeConfig(),
         threads: int | None = 1,
         bf16: bool | None = None,
+        frozen: bool = True,
     ) -> None:
         # Folded batch norm and channels-last memory: about 1.4x faster on a CPU core.
         self._float32 = fuse_batchnorm(model.eval()).to(memory_format=torch.channels_last)
-        self._bfloat16: nn.Module | None = None
+        self._nets: dict[bool, nn.Module] = {}
         if threads is not None and torch.get_num_threads() != threads:
             torch.set_num_threads(threads)
         self.decode_cfg = decode_cfg
         self.input_size = tuple(model.cfg.input_size)
         self.bf16 = native_bf16() if bf16 is None else bool(bf16)
+        self.frozen = frozen
 
     @property
     def model(self) -> nn.Module:
-        """The network that runs: a bfloat16 copy when :attr:`bf16` (weights cast once, not per
-        call as autocast would; about 0.3 ms less per frame), else the float32 one."""
-        if not self.bf16:
-            return self._float32
-        if self._bfloat16 is None:
-            self._bfloat16 = copy.deepcopy(self._float32).to(torch.bfloat16)
-        return self._bfloat16
+        """The network that runs, built on first use: a bfloat16 copy when :attr:`bf16` (weights
+        cast once, not per call as autocast would; about 0.3 ms less per frame), else the float32
+        one; frozen when :attr:`frozen`."""
+        if self.bf16 not in self._nets:
+            net = self._float32
+            if self.bf16:
+                net = copy.deepcopy(net).to(torch.bfloat16)
+            if self.frozen:
+                w, h = self.input_size
+                dtype = torch.bfloat16 if self.bf16 else torch.float32
+                net = frozen_trace(net, torch.zeros(1, 3, h, w, dtype=dtype))
+            self._nets[self.bf16] = net
+        return self._nets[self.bf16]
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> CnnDetector:
@@ -99,17 +127,19 @@ class CnnDetector(Detector):
     def _prepare(self, image: np.ndarray) -> np.ndarray:
         if image.shape[1::-1] != self.input_size:
             image = cv2.resize(image, self.input_size, interpolation=cv2.INTER_AREA)
-        return image.transpose(2, 0, 1).astype(np.float32) / 255.0
+        return image
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""
         images = [validate_image(im) for im in images]
         if not images:
             return []
-        x = torch.from_numpy(np.stack([self._prepare(im) for im in images]))
-        x = x.contiguous(memory_format=torch.channels_last)
+        # (B, H, W, 3) viewed as (B, 3, H, W) is channels-last already: no copy
+        x = torch.from_numpy(np.stack([self._prepare(im) for im in images])).permute(0, 3, 1, 2)
+        x = x.float().div_(255.0)
+        net = self.model  # built (and traced) outside inference mode
         with torch.inference_mode():
-            out = self.model(x.to(torch.bfloat16) if self.bf16 else x).float()
+            out = net(x.to(torch.bfloat16) if self.bf16 else x).float()
         results = []
         for im, o in zip(images, out, strict=True):
             h, w = im.shape[:2]

@@ -1,0 +1,40 @@
+"""The CNN detector's frozen (TorchScript) network gives exactly the eager network's output."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from icarus_vision.gate_detect.cnn import CnnDetector, frozen_trace
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig
+from icarus_vision.gate_detect.cnn.model import CornerNet
+from tests.gate_detect.conftest import TINY_MODEL
+
+
+@pytest.mark.parametrize("bf16", [False, True])
+def test_frozen_detector_detects_as_the_eager_one(bf16):
+    torch.manual_seed(0)
+    model = CornerNet(TINY_MODEL)
+    eager, frozen = (CnnDetector(model, DecodeConfig(centre_threshold=0.0), bf16=bf16, frozen=f)
+                     for f in (False, True))  # fmt: skip
+    assert not isinstance(frozen.model, CornerNet) and isinstance(eager.model, CornerNet)
+    w, h = TINY_MODEL.input_size
+    images = np.random.default_rng(0).integers(0, 256, (3, h, w, 3), dtype=np.uint8)
+    a, b = eager.detect_batch(list(images)), frozen.detect_batch(list(images))
+    assert sum(map(len, a)) > 0
+    for da, db in zip(a, b, strict=True):
+        assert len(da) == len(db)
+        for ga, gb in zip(da, db, strict=True):
+            np.testing.assert_array_equal(ga.corners, gb.corners)
+            assert ga.score == gb.score
+
+
+def test_a_network_that_cannot_be_traced_runs_as_it_is():
+    class DictOut(nn.Module):  # a dict output fails strict tracing
+        def forward(self, x):
+            return {"maps": x}
+
+    net = DictOut()
+    assert frozen_trace(net, torch.zeros(1, 3, 4, 4)) is net
