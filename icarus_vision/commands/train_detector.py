@@ -30,10 +30,10 @@ def train_detector_cmd(
     widths: str | None = typer.Option(
         None,
         help="Channels of the four encoder stages of a new network, comma-separated "
-        "[default: 16,32,64,128].",
+        "[default: 16,32,64,160].",
     ),
     head_width: int | None = typer.Option(
-        None, min=1, help="Channels of a new network's decoder head [default: 24]."
+        None, min=1, help="Channels of a new network's decoder head [default: 32]."
     ),
 ) -> None:
     """Train the corner network with augmentation; validate every epoch.

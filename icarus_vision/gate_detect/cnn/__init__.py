@@ -43,8 +43,8 @@ def frozen_trace(model: nn.Module, example: torch.Tensor) -> nn.Module:
     if that fails.
 
     Freezing makes the weights constants of one graph, run without the Python calls of the
-    modules: the outputs are identical, and the shipped network runs about 0.25 ms per frame
-    faster on one core. Tracing and freezing take about 0.1 s (the detector does it when built).
+    modules: the outputs are identical, and a frame takes 0.2-0.7 ms less on one core (the README's
+    figures). Tracing and freezing take about 0.1 s (the detector does it when built).
     TorchScript is deprecated in favour of ``torch.compile``, which needs a
     C++ compiler and tens of seconds at start-up; with torch pinned, tracing stays the cheaper way.
     """
@@ -80,7 +80,7 @@ class CnnDetector(Detector):
             faster where the CPU has bfloat16 arithmetic; None: where it has
             (:func:`native_bf16`). Decoding stays float32.
         frozen: run a TorchScript-frozen trace of the network (:func:`frozen_trace`): the same
-            output, about 0.25 ms less per frame.
+            output, faster.
     """
 
     name = "cnn"

@@ -34,10 +34,10 @@ class ModelConfig:
     """Network input (width, height), pixels; frames are resized to it (INTER_AREA)."""
     image_size: tuple[int, int] = (320, 240)
     """Camera frame (width, height) the network was trained for, pixels."""
-    widths: tuple[int, int, int, int] = (16, 32, 64, 128)
+    widths: tuple[int, int, int, int] = (16, 32, 64, 160)
     """Channels of the four encoder stages (each halves the resolution; the first works at input
     stride 2, or 4 after a stem)."""
-    head_width: int = 24
+    head_width: int = 32
     """Channels of the decoder at the output resolution."""
     stem_width: int = 12
     """Channels of a stride-2 convolution on the input before the encoder (0: no stem; the
