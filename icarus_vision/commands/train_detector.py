@@ -35,6 +35,11 @@ def train_detector_cmd(
     head_width: int | None = typer.Option(
         None, min=1, help="Channels of a new network's decoder head [default: 32]."
     ),
+    ema_decay: float = typer.Option(
+        0.0,
+        help="Validate and keep as best an exponential moving average of the weights, updated "
+        "every step with this decay, e.g. 0.999 (0: off).",
+    ),
 ) -> None:
     """Train the corner network with augmentation; validate every epoch.
 
@@ -53,7 +58,8 @@ def train_detector_cmd(
         model = replace(model, head_width=head_width)
     result = train_detector(
         data, out, epochs=epochs, seed=seed, resume=resume, model_config=model,
-        config=TrainConfig(ignore_below_px=ignore_below_px), log=lambda s: console.print(s),
+        config=TrainConfig(ignore_below_px=ignore_below_px, ema_decay=ema_decay),
+        log=lambda s: console.print(s),
     )  # fmt: skip
     m = result.best_metrics
     console.print(

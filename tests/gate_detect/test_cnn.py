@@ -290,12 +290,13 @@ def test_train_detector_writes_checkpoints_saves_on_ctrl_c_and_resumes(tiny_data
     assert again["val_default_decode"] == first["val_default_decode"]
 
 
-def test_resumed_training_equals_an_uninterrupted_run(tiny_dataset, tmp_path):
+@pytest.mark.parametrize("ema_decay", [0.0, 0.9])
+def test_resumed_training_equals_an_uninterrupted_run(tiny_dataset, tmp_path, ema_decay):
     from safetensors.torch import load_file
 
     from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
 
-    cfg = TrainConfig(batch_size=4, bf16=False, tune_decode=False)
+    cfg = TrainConfig(batch_size=4, bf16=False, tune_decode=False, ema_decay=ema_decay)
 
     def interrupt(line: str) -> None:
         raise KeyboardInterrupt
@@ -306,9 +307,10 @@ def test_resumed_training_equals_an_uninterrupted_run(tiny_dataset, tmp_path):
     train_detector(tiny_dataset, tmp_path / "a", epochs=2, resume=True, progress=False)
     train_detector(tiny_dataset, tmp_path / "b", epochs=2, config=cfg, model_config=TINY_MODEL,
                    progress=False)  # fmt: skip
-    a, b = (load_file(tmp_path / r / "last" / "model.safetensors") for r in "ab")
-    assert a.keys() == b.keys()
-    assert all(torch.equal(a[k], b[k]) for k in a)
+    for kept in ("last", "best"):  # best: the moving average, if any
+        a, b = (load_file(tmp_path / r / kept / "model.safetensors") for r in "ab")
+        assert a.keys() == b.keys()
+        assert all(torch.equal(a[k], b[k]) for k in a)
 
 
 @pytest.mark.parametrize("pos", [(0.0, 0.0, 2.0), (-2.0, 0.0, 2.0), (0.5, 0.6, 2.3)])
