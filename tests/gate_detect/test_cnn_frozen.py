@@ -20,6 +20,9 @@ def test_frozen_detector_detects_as_the_eager_one(bf16):
     eager, frozen = (CnnDetector(model, DecodeConfig(centre_threshold=0.0), bf16=bf16, frozen=f)
                      for f in (False, True))  # fmt: skip
     assert not isinstance(frozen.model, CornerNet) and isinstance(eager.model, CornerNet)
+    eager.frozen = True  # the setting can change after construction
+    assert not isinstance(eager.model, CornerNet)
+    eager.frozen = False
     w, h = TINY_MODEL.input_size
     images = np.random.default_rng(0).integers(0, 256, (3, h, w, 3), dtype=np.uint8)
     a, b = eager.detect_batch(list(images)), frozen.detect_batch(list(images))

@@ -44,9 +44,9 @@ def frozen_trace(model: nn.Module, example: torch.Tensor) -> nn.Module:
 
     Freezing makes the weights constants of one graph, run without the Python calls of the
     modules: the outputs are identical, and a frame takes 0.2-0.7 ms less on one core (the README's
-    figures). Tracing and freezing take about 0.1 s (the detector does it when built).
-    TorchScript is deprecated in favour of ``torch.compile``, which needs a
-    C++ compiler and tens of seconds at start-up; with torch pinned, tracing stays the cheaper way.
+    figures). Tracing and freezing take about 0.1 s (the detector does it when built). TorchScript
+    is deprecated in favour of ``torch.compile``, which needs a C++ compiler and tens of seconds at
+    start-up; with torch pinned, tracing stays the cheaper way.
     """
     try:
         with warnings.catch_warnings(), torch.no_grad():
@@ -95,7 +95,7 @@ class CnnDetector(Detector):
     ) -> None:
         # Folded batch norm and channels-last memory: about 1.4x faster on a CPU core.
         self._float32 = fuse_batchnorm(model.eval()).to(memory_format=torch.channels_last)
-        self._nets: dict[bool, nn.Module] = {}
+        self._nets: dict[tuple[bool, bool], nn.Module] = {}  # by (bf16, frozen)
         if threads is not None and torch.get_num_threads() != threads:
             torch.set_num_threads(threads)
         self.decode_cfg = decode_cfg
@@ -106,10 +106,11 @@ class CnnDetector(Detector):
 
     @property
     def model(self) -> nn.Module:
-        """The network that runs (built on first use): a bfloat16 copy when :attr:`bf16` (weights
-        cast once, not per call as autocast would; about 0.3 ms less per frame), else the float32
-        one; frozen when :attr:`frozen`."""
-        if self.bf16 not in self._nets:
+        """The network that runs (built on first use of each setting): a bfloat16 copy when
+        :attr:`bf16` (weights cast once, not per call as autocast would; about 0.3 ms less per
+        frame), else the float32 one; frozen when :attr:`frozen`."""
+        key = (self.bf16, self.frozen)
+        if key not in self._nets:
             net = self._float32
             if self.bf16:
                 net = copy.deepcopy(net).to(torch.bfloat16)
@@ -117,8 +118,8 @@ class CnnDetector(Detector):
                 w, h = self.input_size
                 dtype = torch.bfloat16 if self.bf16 else torch.float32
                 net = frozen_trace(net, torch.zeros(1, 3, h, w, dtype=dtype))
-            self._nets[self.bf16] = net
-        return self._nets[self.bf16]
+            self._nets[key] = net
+        return self._nets[key]
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> CnnDetector:
