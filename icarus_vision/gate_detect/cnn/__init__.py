@@ -1,8 +1,10 @@
 """The CNN gate-corner detector (``make_detector("cnn")`` or ``"cnn:PATH"``).
 
 The network (``model.py``) predicts gate-centre and corner heatmaps at a quarter of the camera
-resolution; ``targets.decode`` groups corners into gates. ``train.py`` trains it on gen-dataset
-output; ``checkpoint.py`` saves it as safetensors + JSON. The shipped default lives in
+resolution; ``decode.py`` groups corners into candidate gates. An optional second stage
+(``refine.py``) rectifies each candidate into a small patch, verifies it and corrects its corners.
+``train.py`` trains the first stage on gen-dataset output, ``refine_train.py`` the second;
+``checkpoint.py`` saves both as safetensors + JSON. The shipped default lives in
 ``icarus_vision/models/detector/``.
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 import copy
 import functools
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -19,9 +22,10 @@ import torch
 from torch import nn
 
 from icarus_vision.gate_detect.base import Detector, GateDetection, validate_image
-from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint
+from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint, load_refiner
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.refine import NUM_GEOM, RefineNet, refine
 from icarus_vision.gate_detect.registry import register_detector
 
 
@@ -81,6 +85,9 @@ class CnnDetector(Detector):
             (:func:`native_bf16`). Decoding stays float32.
         frozen: run a TorchScript-frozen trace of the network (:func:`frozen_trace`): the same
             output, faster.
+        refiner: a trained second stage (:class:`RefineNet`): ``decode_cfg`` then yields its
+            candidates, and it decides which are gates and where their corners are. It runs in
+            float32 (frozen when ``frozen``).
     """
 
     name = "cnn"
@@ -92,6 +99,7 @@ class CnnDetector(Detector):
         threads: int | None = 1,
         bf16: bool | None = None,
         frozen: bool = True,
+        refiner: RefineNet | None = None,
     ) -> None:
         # Folded batch norm and channels-last memory: about 1.4x faster on a CPU core.
         self._float32 = fuse_batchnorm(model.eval()).to(memory_format=torch.channels_last)
@@ -103,6 +111,18 @@ class CnnDetector(Detector):
         self.bf16 = native_bf16() if bf16 is None else bool(bf16)
         self.frozen = frozen
         _ = self.model  # build (and trace) it now rather than in the first frame's time
+        self.refine_cfg = None if refiner is None else refiner.cfg
+        self.refiner = None
+        if refiner is not None:
+            # No candidate whose centre scores under the refiner's threshold can pass it (its
+            # score is at most the centre's), so none is decoded: the same output, faster.
+            floor = max(decode_cfg.centre_threshold, refiner.cfg.threshold)
+            self.decode_cfg = replace(decode_cfg, centre_threshold=floor)
+            self.refiner = fuse_batchnorm(copy.deepcopy(refiner).eval())
+            if frozen:
+                p = refiner.cfg.patch
+                example = (torch.zeros(2, 3, p, p), torch.zeros(2, NUM_GEOM))
+                self.refiner = frozen_trace(self.refiner, example)
 
     @property
     def model(self) -> nn.Module:
@@ -124,8 +144,9 @@ class CnnDetector(Detector):
     @classmethod
     def load(cls, path: str | Path | None = None) -> CnnDetector:
         """From a checkpoint folder or file (None: the shipped default)."""
-        model, decode_cfg, _ = load_checkpoint(SHIPPED if path is None else path)
-        return cls(model, decode_cfg)
+        path = SHIPPED if path is None else path
+        model, decode_cfg, meta = load_checkpoint(path)
+        return cls(model, decode_cfg, refiner=load_refiner(path, meta))
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
         if image.shape[1::-1] != self.input_size:
@@ -147,7 +168,12 @@ class CnnDetector(Detector):
         for im, o in zip(images, out, strict=True):
             h, w = im.shape[:2]
             scale = (w / o.shape[-1], h / o.shape[-2])
-            found = decode(o, self.decode_cfg, scale)
+            if self.refiner is None:
+                found = decode(o, self.decode_cfg, scale)
+            else:
+                cand, peaks = decode(o, self.decode_cfg, scale, with_peaks=True)
+                found = refine(self.refiner, im, cand, peaks, self.refine_cfg,
+                               self.decode_cfg.nms_iou)  # fmt: skip
             results.append([GateDetection(c, s, score) for c, s, score in found])
         return results
 

@@ -2,7 +2,9 @@
 
 A checkpoint is a folder holding the weights (safetensors: tensors only, nothing executable is
 unpickled) and a JSON file with the architecture, the decoding thresholds and how it was trained.
-Every file is written atomically. ``load_checkpoint`` accepts the folder or either file.
+A detector with a second stage also holds ``refiner.safetensors``, and its JSON a ``refine``
+section (:class:`~icarus_vision.gate_detect.cnn.refine.RefineConfig`). Every file is written
+atomically. ``load_checkpoint`` accepts the folder or any of its files.
 """
 
 from __future__ import annotations
@@ -20,25 +22,44 @@ from safetensors.torch import load_file, save_file
 from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
+from icarus_vision.gate_detect.cnn.refine import NUM_GEOM, RefineConfig, RefineNet
 
 FORMAT = "icarus-vision-detector/1"
 WEIGHTS, CONFIG, ONNX = "model.safetensors", "detector.json", "model.onnx"
+REFINER, REFINER_ONNX = "refiner.safetensors", "refiner.onnx"
 SHIPPED = Path(__file__).resolve().parents[2] / "models" / "detector"
 """The default detector shipped inside the package."""
 
 
+def _save_weights(module: torch.nn.Module, path: Path) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    save_file({k: v.detach().contiguous() for k, v in module.state_dict().items()}, str(tmp))
+    os.replace(tmp, path)
+
+
 def save_checkpoint(
-    folder: str | Path, model: CornerNet, decode: DecodeConfig, info: dict | None = None
+    folder: str | Path,
+    model: CornerNet,
+    decode: DecodeConfig,
+    info: dict | None = None,
+    refiner: RefineNet | None = None,
+    refine_info: dict | None = None,
 ) -> Path:
-    """Write ``folder/model.safetensors`` and ``folder/detector.json`` (atomically); returns folder."""
+    """Write ``folder/model.safetensors`` and ``folder/detector.json`` (atomically), and with a
+    ``refiner`` (its config inside it) ``folder/refiner.safetensors``; returns folder."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    tmp = folder / f".{WEIGHTS}.tmp"
-    state = {k: v.detach().contiguous() for k, v in model.state_dict().items()}
-    save_file(state, str(tmp))
-    os.replace(tmp, folder / WEIGHTS)
+    _save_weights(model, folder / WEIGHTS)
     meta = {"format": FORMAT, "model": model.cfg.to_dict(), "decode": asdict(decode)}
-    atomic_write_json(folder / CONFIG, {**meta, "training": info or {}})
+    if refiner is not None:
+        _save_weights(refiner, folder / REFINER)
+        meta["refine"] = refiner.cfg.to_dict()
+    else:
+        (folder / REFINER).unlink(missing_ok=True)
+    meta["training"] = info or {}
+    if refine_info is not None:
+        meta["refine_training"] = refine_info
+    atomic_write_json(folder / CONFIG, meta)
     return folder
 
 
@@ -53,7 +74,8 @@ def resolve(path: str | Path) -> Path:
 
 
 def load_checkpoint(path: str | Path) -> tuple[CornerNet, DecodeConfig, dict]:
-    """The network (eval mode), its decoding thresholds and its JSON metadata.
+    """The network (eval mode), its decoding thresholds and its JSON metadata (the refiner, if
+    any: :func:`load_refiner`).
 
     Raises:
         FileNotFoundError: no checkpoint there (the missing file is named).
@@ -81,6 +103,34 @@ def load_checkpoint(path: str | Path) -> tuple[CornerNet, DecodeConfig, dict]:
     return model.eval(), decode, meta
 
 
+def load_refiner(path: str | Path, meta: dict) -> RefineNet | None:
+    """The second stage of the checkpoint at ``path`` (eval mode), None if it has none.
+
+    Args:
+        meta: the checkpoint's JSON metadata (from :func:`load_checkpoint`).
+
+    Raises:
+        FileNotFoundError / ValueError: a ``refine`` section without its weights, or corrupt
+            weights or config (the file is named).
+    """
+    if "refine" not in meta:
+        return None
+    folder = resolve(path)
+    w_path = folder / REFINER
+    if not w_path.is_file():
+        raise FileNotFoundError(f"{w_path}: refiner weights not found ({CONFIG} has a refiner)")
+    try:
+        net = RefineNet(RefineConfig.from_dict(meta["refine"]))
+    except (ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{folder / CONFIG}: not a valid refiner config ({e})") from None
+    try:
+        net.load_state_dict(load_file(str(w_path)), strict=True)
+    except (SafetensorError, RuntimeError, OSError, ValueError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(f"{w_path}: corrupt or incompatible refiner weights ({msg})") from None
+    return net.eval()
+
+
 def export_onnx(model: CornerNet, path: str | Path) -> Path:
     """Export the network (input ``image`` (1, 3, h, w) in [0, 1], output ``maps``) to ONNX."""
     path = Path(path)
@@ -101,4 +151,29 @@ def export_onnx(model: CornerNet, path: str | Path) -> Path:
         )
     os.replace(tmp, path)
     model.train(was_training)
+    return path
+
+
+def export_refiner_onnx(net: RefineNet, path: str | Path) -> Path:
+    """Export the refiner (inputs ``patches`` (N, 3, P, P) in [0, 1] and ``geometry`` (N, 11),
+    output ``refined`` (N, 9); N dynamic) to ONNX."""
+    path = Path(path)
+    p = net.cfg.patch
+    tmp = path.with_name(f".{path.name}.tmp")
+    was_training = net.training
+    net.eval()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            net,
+            (torch.zeros(2, 3, p, p), torch.zeros(2, NUM_GEOM)),
+            str(tmp),
+            dynamo=False,
+            input_names=["patches", "geometry"],
+            output_names=["refined"],
+            dynamic_axes={"patches": {0: "n"}, "geometry": {0: "n"}, "refined": {0: "n"}},
+            opset_version=17,
+        )
+    os.replace(tmp, path)
+    net.train(was_training)
     return path

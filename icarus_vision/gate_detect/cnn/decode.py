@@ -171,19 +171,21 @@ def _snap(
 
 
 def decode(
-    out: torch.Tensor, cfg: DecodeConfig, scale: tuple[float, float]
-) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    out: torch.Tensor, cfg: DecodeConfig, scale: tuple[float, float], with_peaks: bool = False
+):
     """Gates from one image's network output.
 
     Args:
         out: (15, H, W) raw network output.
         cfg: thresholds.
         scale: (sx, sy) camera pixels per grid cell.
+        with_peaks: also return the corner peaks (what the refiner snaps to).
 
     Returns:
         per gate ``(corners (4, 2) pixels TL, TR, BR, BL, corner_scores (4,), score)``, best first.
         A regressed gate's score is its centre peak's; a nested one's is that times the mean
-        score of its corners.
+        score of its corners. With ``with_peaks``, a pair ``(gates, peaks)``, peaks being per
+        corner type ``(positions (M, 2) pixels, scores (M,))``.
     """
     maps = np.ascontiguousarray(out.detach().numpy(), dtype=np.float32)
     heat_np, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
@@ -223,6 +225,8 @@ def decode(
         gates.append((corners, scores, score))
         if len(gates) == cfg.max_gates:
             break
+    if with_peaks:
+        return gates, [(p * np.asarray(scale) - 0.5, v) for p, v in cand]
     return gates
 
 

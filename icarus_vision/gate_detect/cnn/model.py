@@ -72,7 +72,8 @@ class ModelConfig:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
-def _conv(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:
+def conv_bn_relu(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:
+    """3x3 convolution (no bias), batch norm, ReLU."""
     return nn.Sequential(
         nn.Conv2d(cin, cout, 3, stride, padding=dilation, dilation=dilation, bias=False),
         nn.BatchNorm2d(cout),
@@ -96,19 +97,21 @@ class CornerNet(nn.Module):
         c1, c2, c3, c4 = cfg.widths
         h = cfg.head_width
         self.cfg = cfg
-        self.stem = _conv(3, cfg.stem_width, 2) if cfg.stem_width else nn.Identity()
-        self.enc1 = nn.Sequential(_conv(cfg.stem_width or 3, c1, 2), _conv(c1, c1))
-        self.enc2 = nn.Sequential(_conv(c1, c2, 2), _conv(c2, c2))
-        self.enc3 = nn.Sequential(_conv(c2, c3, 2), _conv(c3, c3))
+        self.stem = conv_bn_relu(3, cfg.stem_width, 2) if cfg.stem_width else nn.Identity()
+        self.enc1 = nn.Sequential(conv_bn_relu(cfg.stem_width or 3, c1, 2), conv_bn_relu(c1, c1))
+        self.enc2 = nn.Sequential(conv_bn_relu(c1, c2, 2), conv_bn_relu(c2, c2))
+        self.enc3 = nn.Sequential(conv_bn_relu(c2, c3, 2), conv_bn_relu(c3, c3))
         self.enc4 = nn.Sequential(
-            _conv(c3, c4, 2), _conv(c4, c4, dilation=2), _conv(c4, c4, dilation=4)
+            conv_bn_relu(c3, c4, 2),
+            conv_bn_relu(c4, c4, dilation=2),
+            conv_bn_relu(c4, c4, dilation=4),
         )
         self.lat3 = nn.Conv2d(c3, c4, 1)
-        self.up3 = _conv(c4, c3)
+        self.up3 = conv_bn_relu(c4, c3)
         self.lat2 = nn.Conv2d(c2, c3, 1)
-        self.up2 = _conv(c3, h)
+        self.up2 = conv_bn_relu(c3, h)
         self.lat1 = nn.Conv2d(c1, h, 1)
-        self.up1 = _conv(h, h)
+        self.up1 = conv_bn_relu(h, h)
         self.out = nn.Conv2d(h, NUM_OUT, 1)
         with torch.no_grad():  # heatmaps start near 0.01 (focal-loss practice)
             self.out.bias.zero_()

@@ -1,0 +1,57 @@
+"""`icarus-vision train-refiner`: train the CNN detector's second stage on a trained first stage."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+
+from icarus_vision.cli import app, console, user_errors
+
+
+@app.command("train-refiner")
+@user_errors
+def train_refiner_cmd(
+    data: Path = typer.Option(
+        ...,
+        help="gen-dataset output (train and val splits), ideally generated with a seed the "
+        "first stage was not trained on.",
+    ),
+    out: Path = typer.Option(..., help="Output folder: best/, last/, refiner.onnx, tb/."),
+    detector: Path = typer.Option(
+        None, help="The first stage: a detector checkpoint [default: the shipped one]."
+    ),
+    epochs: int = typer.Option(12, min=1, help="Total epochs (a resumed run continues to this)."),
+    seed: int = typer.Option(0, help="Random seed (weights, shuffling, augmentation)."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the run in OUT/last with its own settings."
+    ),
+    patch: int = typer.Option(
+        48, min=16, help="Side of a new refiner's patch, px (a multiple of 8)."
+    ),
+) -> None:
+    """Train the refiner: it rectifies each of the first stage's candidate gates into a small
+    patch, decides whether it is a gate and corrects its corners.
+
+    Writes OUT/best and OUT/last (complete detector checkpoints: the first stage with its
+    candidate decoding, plus refiner.safetensors), OUT/refiner.onnx, OUT/history.json and
+    TensorBoard logs in OUT/tb. Ctrl-C saves OUT/last; --resume continues from it. Use the result
+    with --detector cnn:OUT/best.
+    """
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
+    from icarus_vision.gate_detect.cnn.refine import RefineConfig
+    from icarus_vision.gate_detect.cnn.refine_train import train_refiner
+
+    result = train_refiner(
+        SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
+        resume=resume, refine_config=RefineConfig(patch=patch),
+        log=lambda s: console.print(s, highlight=False),
+    )  # fmt: skip
+    m = result.best_metrics
+    console.print(
+        f"best epoch {result.best_epoch}: precision {m.get('precision')}, recall "
+        f"{m.get('recall')}, median corner error {m.get('corner_error_px', {}).get('median')} px",
+        highlight=False,
+    )
+    console.print(f"checkpoints written to {escape(str(out))}/ (best/, last/, refiner.onnx)")

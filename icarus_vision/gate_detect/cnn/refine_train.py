@@ -1,0 +1,489 @@
+"""Training the refiner (``refine.py``) on a trained corner network's candidates.
+
+Examples: the first stage runs over a dataset with loose decoding thresholds (``CANDIDATES``);
+each candidate is labelled a gate when its corners lie within ``MATCH`` of a labelled gate's side
+(mean corner distance), and that gate's corners are its regression target. Every epoch also adds
+the labelled gates themselves with jittered corners (``JITTER``), so that the corrections are
+learnt over a wider spread of errors than the first stage happens to make. Patches are cut anew
+each epoch, the candidates jittered slightly, half of them mirrored (the corner order swapped
+with the patch), with brightness, contrast and noise jitter.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from icarus_vision.fileio import atomic_write_json
+from icarus_vision.gate_detect.cnn.augment import FLIP_ORDER
+from icarus_vision.gate_detect.cnn.data import Split
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
+from icarus_vision.gate_detect.cnn.refine import (
+    RefineConfig,
+    RefineNet,
+    corners_to_offsets,
+    extract,
+    geometry,
+    homographies,
+    refine,
+    stage_scores,
+    to_tensor,
+    usable,
+)
+from icarus_vision.gate_detect.metrics import evaluate_image, summarize
+
+CANDIDATES = DecodeConfig(
+    centre_threshold=0.2, corner_threshold=0.2, snap_radius=0.4, min_snapped=0, sure_centre=1.0,
+    nested_residual=0.08,
+)  # fmt: skip
+"""Loose first-stage decoding: the refiner, not the thresholds, decides."""
+MATCH = 0.5
+"""A candidate is a gate when its mean corner distance to a labelled gate is at most this
+fraction of that gate's mean side (looser than eval-detector's rule: the refiner can move the
+corners there, and duplicates of one gate fall to the overlap test once corrected)."""
+JITTER = (0.02, 0.15)
+"""Corner noise of the jittered labelled gates: per gate, a standard deviation drawn from this
+range, as a fraction of the gate's side."""
+STATE = "refine_state.pt"
+REFINER_ONNX = "refiner.onnx"
+
+
+@dataclass
+class Candidates:
+    """First-stage candidates of a split, labelled.
+
+    Attributes:
+        image: (N,) index of the image each candidate is in.
+        quads: (N, 4, 2) candidate corners, camera pixels.
+        targets: (N, 4, 2) corners of the matched labelled gate (NaN: not a gate).
+        scores: (N, 3) first-stage scores (:func:`~icarus_vision.gate_detect.cnn.refine.stage_scores`).
+        per_image: per image, the first stage's ``(gates, peaks)`` (for validation).
+    """
+
+    image: np.ndarray
+    quads: np.ndarray
+    targets: np.ndarray
+    scores: np.ndarray
+    per_image: list
+
+
+def first_stage(model: torch.nn.Module, images: np.ndarray, cfg: DecodeConfig, batch: int = 32):
+    """Per image ``(gates, peaks)`` of the corner network (eval) decoded with ``cfg``."""
+    out = []
+    with torch.inference_mode():
+        for i in range(0, len(images), batch):
+            x = torch.from_numpy(images[i : i + batch]).permute(0, 3, 1, 2).float() / 255.0
+            maps = model(x)
+            for m, im in zip(maps, images[i : i + batch], strict=True):
+                scale = (im.shape[1] / m.shape[-1], im.shape[0] / m.shape[-2])
+                out.append(decode(m.float(), cfg, scale, with_peaks=True))
+    return out
+
+
+def _side(q: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(np.roll(q, -1, axis=-2) - q, axis=-1).mean(axis=-1)
+
+
+def label(quads: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(N, 4, 2) targets of (N, 4, 2) candidates among (G, 4, 2) labelled gates (MATCH rule);
+    NaN for a candidate that is no gate."""
+    targets = np.full(quads.shape, np.nan)
+    truth = truth[np.isfinite(truth).all(axis=(1, 2))]
+    if not len(truth) or not len(quads):
+        return targets
+    d = np.linalg.norm(quads[:, None] - truth[None], axis=-1).mean(axis=-1) / _side(truth)[None]
+    j = d.argmin(axis=1)
+    ok = d[np.arange(len(quads)), j] <= MATCH
+    targets[ok] = truth[j[ok]]
+    return targets
+
+
+def collect(model: torch.nn.Module, split: Split, cfg: DecodeConfig = CANDIDATES) -> Candidates:
+    """Run the first stage over ``split`` (loaded at camera resolution) and label its candidates."""
+    per_image = first_stage(model, split.images, cfg)
+    idx, quads, targets, scores = [], [], [], []
+    for i, ((gates, _), truth) in enumerate(zip(per_image, split.gates, strict=True)):
+        q = np.array([g[0] for g in gates], float).reshape(-1, 4, 2)
+        ok = usable(q)
+        t = np.array([g.corners for g in truth], float).reshape(-1, 4, 2)
+        idx.append(np.full(ok.sum(), i))
+        quads.append(q[ok])
+        targets.append(label(q[ok], t))
+        scores.append(stage_scores(gates)[ok])
+    return Candidates(np.concatenate(idx), np.concatenate(quads), np.concatenate(targets),
+                      np.concatenate(scores), per_image)  # fmt: skip
+
+
+def jittered_truth(split: Split, rng: np.random.Generator, min_side_px: float = 8.0):
+    """Labelled gates (side >= ``min_side_px``, finite) with noisy corners: (image idx, quads,
+    targets)."""
+    idx, t = [], []
+    for i, gates in enumerate(split.gates):
+        for g in gates:
+            if np.isfinite(g.corners).all() and _side(g.corners) >= min_side_px:
+                idx.append(i)
+                t.append(g.corners)
+    idx, t = np.array(idx, int), np.array(t, float).reshape(-1, 4, 2)
+    sigma = rng.uniform(*JITTER, size=len(t)) * _side(t)
+    q = t + rng.normal(size=t.shape) * sigma[:, None, None]
+    ok = usable(q)
+    return idx[ok], q[ok], t[ok]
+
+
+def make_batch(
+    images: np.ndarray,
+    idx: np.ndarray,
+    quads: np.ndarray,
+    targets: np.ndarray,
+    scores: np.ndarray,
+    cfg: RefineConfig,
+    rng: np.random.Generator | None,
+):
+    """Patches, geometry inputs, labels (N,) and offset targets (N, 8) (NaN rows: no gate) of
+    some examples; with ``rng``, augmented (module docstring)."""
+    quads, targets = quads.copy(), targets.copy()
+    w = images.shape[2]
+    flip = np.zeros(len(quads), bool)
+    if rng is not None:
+        side = _side(quads)
+        moved = quads + rng.normal(size=quads.shape) * (0.015 * side)[:, None, None]
+        ok = usable(moved)
+        quads[ok] = moved[ok]
+        # mirrored: the corner order swapped, so the patch comes out mirrored
+        flip = rng.random(len(quads)) < 0.5
+        quads[flip] = quads[flip][:, FLIP_ORDER]
+        targets[flip] = targets[flip][:, FLIP_ORDER]
+    h = homographies(quads, cfg)
+    patches = np.concatenate(
+        [extract(images[i], h[k : k + 1], cfg) for k, i in enumerate(idx)]
+    ) if len(idx) else np.zeros((0, cfg.patch, cfg.patch, 3), np.uint8)  # fmt: skip
+    x = to_tensor(patches)
+    if rng is not None and len(x):
+        n = len(x)
+        gain = torch.from_numpy(rng.uniform(0.6, 1.4, (n, 1, 1, 1))).float()
+        bias = torch.from_numpy(rng.uniform(-0.15, 0.15, (n, 1, 1, 1))).float()
+        colour = torch.from_numpy(rng.uniform(0.85, 1.15, (n, 3, 1, 1))).float()
+        noise = torch.from_numpy(rng.normal(size=x.shape) * rng.uniform(0, 0.04, (n, 1, 1, 1)))
+        x = ((x - 0.5) * gain * colour + 0.5 + bias + noise.float()).clamp_(0, 1)
+    gate = np.isfinite(targets).all(axis=(1, 2))
+    off = np.full((len(idx), 8), np.nan)
+    if gate.any():
+        off[gate] = corners_to_offsets(h[gate], targets[gate], cfg)
+    seen = quads.copy()  # a mirrored candidate is where its mirror image would be
+    seen[flip, :, 0] = w - 1 - seen[flip, :, 0]
+    geom = torch.from_numpy(geometry(seen, scores, (w, images.shape[1])))
+    return x, geom, torch.from_numpy(gate.astype(np.float32)), torch.from_numpy(off).float()
+
+
+def loss_terms(
+    out: torch.Tensor, label: torch.Tensor, off: torch.Tensor, real: torch.Tensor
+) -> dict:
+    """Gate BCE over the real candidates (``real`` (N,) bool), smooth-L1 corner offsets over the
+    gates (offsets within one side)."""
+    cls = torch.zeros((), dtype=out.dtype)
+    if real.any():
+        cls = torch.nn.functional.binary_cross_entropy_with_logits(out[real, 0], label[real])
+    use = torch.isfinite(off).all(dim=1) & (off.abs() <= 1.0).all(dim=1)
+    reg = torch.zeros((), dtype=out.dtype)
+    if use.any():
+        reg = torch.nn.functional.smooth_l1_loss(out[use, 1:], off[use], beta=0.02)
+    return {"loss": cls + 10.0 * reg, "gate": cls, "corners": reg}
+
+
+def evaluate(
+    net: torch.nn.Module,
+    split: Split,
+    per_image: list,
+    cfg: RefineConfig,
+    min_gate_px: float = 20.0,
+    nms_iou: float = 0.5,
+) -> dict:
+    """eval-detector figures of first stage + refiner on ``split`` (first-stage output given)."""
+    net.eval()
+    gts, preds = [], []
+    for im, (gates, peaks), truth in zip(split.images, per_image, split.gates, strict=True):
+        found = refine(net, im, gates, peaks, cfg, nms_iou)
+        t = [(g.corners, g.visibility, g.distance) for g in truth]
+        g_rec, p_rec = evaluate_image([(c, s) for c, _, s in found], t, min_gate_px)
+        gts += g_rec
+        preds += p_rec
+    return {**summarize(gts, preds, min_gate_px), "detections": len(preds)}
+
+
+THRESHOLDS = (0.15, 0.2, 0.25, 0.3, 0.35, 0.4)
+SNAPS = (0.0, 0.05)
+
+
+def tune(
+    net, split: Split, per_image: list, cfg: RefineConfig, min_gate_px: float = 20.0
+) -> tuple[RefineConfig, dict]:
+    """The gate threshold and snap radius (grids above) with the best validation score
+    (:func:`~icarus_vision.gate_detect.cnn.tune.score`); ties go to the higher threshold."""
+    from icarus_vision.gate_detect.cnn.tune import choose
+
+    tried = []
+    for t in THRESHOLDS[::-1]:
+        for s in SNAPS:
+            c = replace(cfg, threshold=t, snap=s)
+            tried.append((c, evaluate(net, split, per_image, c, min_gate_px)))
+    return choose(tried)
+
+
+def train_epoch(
+    net: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    sched,
+    split: Split,
+    cands: Candidates,
+    cfg: RefineConfig,
+    rng: np.random.Generator,
+    batch_size: int = 256,
+    on_step=None,
+) -> dict:
+    """One pass over the candidates plus freshly jittered labelled gates; mean loss terms."""
+    j_idx, j_q, j_t = jittered_truth(split, rng)
+    idx = np.concatenate([cands.image, j_idx])
+    quads = np.concatenate([cands.quads, j_q])
+    targets = np.concatenate([cands.targets, j_t])
+    # jittered gates take the scores of random real gate candidates, and teach no classification
+    pos = np.flatnonzero(np.isfinite(cands.targets).all(axis=(1, 2)))
+    j_scores = (
+        cands.scores[rng.choice(pos, len(j_idx))] if len(pos)
+        else np.full((len(j_idx), 3), 0.5, np.float32)
+    )  # fmt: skip
+    scores = np.concatenate([cands.scores, j_scores])
+    real = np.arange(len(idx)) < len(cands.image)
+    order = rng.permutation(len(idx))
+    net.train()
+    sums: dict[str, float] = {}
+    n = 0
+    for s in range(0, len(order), batch_size):
+        b = order[s : s + batch_size]
+        x, geom, lab, off = make_batch(
+            split.images, idx[b], quads[b], targets[b], scores[b], cfg, rng
+        )
+        terms = loss_terms(net(x, geom), lab, off, torch.from_numpy(real[b]))
+        opt.zero_grad(set_to_none=True)
+        terms["loss"].backward()
+        opt.step()
+        sched.step()
+        for k, v in terms.items():
+            sums[k] = sums.get(k, 0.0) + float(v.detach())
+        n += 1
+        if on_step is not None:
+            on_step(sums["loss"] / n)
+    return {k: v / max(n, 1) for k, v in sums.items()}
+
+
+@dataclass(frozen=True)
+class RefineTrainConfig:
+    """Settings of one refiner training run (recorded in ``detector.json``)."""
+
+    epochs: int = 12
+    """Passes over the candidates (plus as many freshly jittered labelled gates)."""
+    seed: int = 0
+    """Seed of the initial weights, the shuffling and the augmentation."""
+    batch_size: int = 256
+    """Examples per optimisation step."""
+    lr: float = 2e-3
+    """Peak learning rate of AdamW (100 warm-up steps, then cosine decay to 0)."""
+    weight_decay: float = 1e-4
+    """AdamW weight decay."""
+    limit: int | None = None
+    """Use only the first ``limit`` images of each split (quick runs and tests)."""
+    min_gate_px: float = 20.0
+    """Smallest gate counted in the validation metrics, pixels."""
+    tune: bool = True
+    """After training, choose the gate threshold and snap radius on the val split."""
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    """What :func:`train_refiner` produced."""
+
+    out_dir: Path
+    best_epoch: int
+    best_metrics: dict
+    history: list[dict]
+
+
+def train_refiner(
+    detector: str | Path,
+    data_dir: str | Path,
+    out_dir: str | Path,
+    epochs: int = 12,
+    seed: int = 0,
+    resume: bool = False,
+    config: RefineTrainConfig | None = None,
+    refine_config: RefineConfig | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] | None = None,
+) -> RefineResult:
+    """Train (or resume training) the second stage of a trained corner network.
+
+    Output folder: ``best/`` and ``last/`` are complete detector checkpoints (the corner network
+    copied, its decoding set to :data:`CANDIDATES`, plus the refiner); ``last/`` also holds
+    ``refine_state.pt`` (what ``resume`` reads); ``refiner.onnx`` (best), ``history.json`` and
+    TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's shuffle and augmentation
+    depend on (seed, epoch) alone, so a resumed run trains as one never interrupted.
+
+    Args:
+        detector: a trained first stage (checkpoint folder or file); its own refiner, if any,
+            is ignored.
+        data_dir: gen-dataset output, ideally generated with a seed the first stage was not
+            trained on (its candidates' errors are then those of unseen images): its ``train``
+            split is trained on, its ``val`` split validates and tunes.
+        out_dir: output folder.
+        epochs: total epochs (a resumed run continues to this number).
+        seed: seed of weights, shuffling and augmentation.
+        resume: continue from ``OUT/last`` with the run's own settings.
+        config: further settings of a new run (``epochs`` and ``seed`` take precedence).
+        refine_config: architecture of a new refiner.
+        progress: show a rich progress bar.
+        log: called with one line per epoch.
+
+    Raises:
+        FileNotFoundError / ValueError: bad detector or dataset, or OUT/last present without
+            ``resume`` (or missing with it).
+    """
+    from icarus_vision.gate_detect.cnn import fuse_batchnorm
+    from icarus_vision.gate_detect.cnn.checkpoint import (
+        export_refiner_onnx,
+        load_checkpoint,
+        load_refiner,
+        save_checkpoint,
+    )
+    from icarus_vision.gate_detect.cnn.data import load_split
+    from icarus_vision.gate_detect.cnn.train import _progress_bar
+    from icarus_vision.gate_detect.cnn.tune import score as _score
+
+    cfg = replace(config or RefineTrainConfig(), epochs=epochs, seed=seed)
+    if cfg.epochs < 1:
+        raise ValueError(f"epochs must be >= 1, got {cfg.epochs}")
+    out = Path(out_dir)
+    last_dir, best_dir = out / "last", out / "best"
+    if resume and not (last_dir / STATE).is_file():
+        raise FileNotFoundError(f"{last_dir / STATE}: nothing to resume")
+    if not resume and (last_dir / STATE).is_file():
+        raise ValueError(
+            f"{out} already holds a training run; pass --resume or choose another --out"
+        )
+    corner_net, _, meta = load_checkpoint(last_dir if resume else detector)
+    torch.manual_seed(cfg.seed)
+    net = RefineNet(refine_config or RefineConfig())
+    if resume:
+        net = load_refiner(last_dir, meta)
+        stored = meta.get("refine_training", {}).get("config", {})
+        known = {f.name for f in fields(RefineTrainConfig)}
+        cfg = replace(
+            RefineTrainConfig(**{k: v for k, v in stored.items() if k in known}), epochs=epochs
+        )
+    first = fuse_batchnorm(copy.deepcopy(corner_net).eval())
+    size = tuple(corner_net.cfg.image_size)
+    train = load_split(data_dir, "train", size, cfg.limit)
+    val = load_split(data_dir, "val", size, cfg.limit)
+    if log is not None:
+        log(f"first-stage candidates of {len(train.files)} + {len(val.files)} images ...")
+    cands, val_cands = collect(first, train), collect(first, val)
+    rcfg = replace(net.cfg, threshold=RefineConfig.threshold, snap=0.0)  # tuned at the end
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    n_jitter = len(jittered_truth(train, np.random.default_rng(0))[0])
+    steps_per_epoch = int(np.ceil((len(cands.image) + n_jitter) / cfg.batch_size))
+    total = cfg.epochs * steps_per_epoch
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: float(min((s + 1) / 100, 0.5 * (1 + np.cos(np.pi * min(s / total, 1.0)))))
+    )
+    start, history, best = 0, [], (-1.0, -1, {})
+    if resume:
+        st = torch.load(last_dir / STATE, weights_only=True)
+        opt.load_state_dict(st["optimizer"])
+        sched.load_state_dict(st["scheduler"])
+        start, history = int(st["epoch"]), json.loads(st["history"])
+        best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(out / "tb"))
+    info = {"detector": str(detector), "data": str(data_dir), "config": asdict(cfg)}
+    first_info = meta.get("training", {})
+
+    def save(folder: Path, epoch: int, extra: dict | None = None) -> None:
+        save_checkpoint(folder, corner_net, CANDIDATES, first_info, net,
+                        {**info, "epoch": epoch, **(extra or {})})  # fmt: skip
+
+    def save_last(epoch: int) -> None:
+        save(last_dir, epoch)
+        state = {"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
+                 "history": json.dumps(history), "best_score": best[0], "best_epoch": best[1],
+                 "best_metrics": json.dumps(best[2])}  # fmt: skip
+        tmp = last_dir / f".{STATE}.tmp"
+        torch.save(state, tmp)
+        os.replace(tmp, last_dir / STATE)
+
+    bar = _progress_bar() if progress else None
+    completed = start
+    try:
+        if bar is not None:
+            bar.start()
+        for epoch in range(start, cfg.epochs):
+            rng = np.random.default_rng([cfg.seed, epoch])
+            task = None
+            if bar is not None:
+                task = bar.add_task(f"epoch {epoch + 1}/{cfg.epochs}", total=steps_per_epoch,
+                                    loss=float("nan"))  # fmt: skip
+            t0 = time.perf_counter()
+
+            def step(loss: float, task=task) -> None:
+                if bar is not None:
+                    bar.update(task, advance=1, loss=loss)
+
+            losses = train_epoch(net, opt, sched, train, cands, rcfg, rng, cfg.batch_size, step)
+            metrics = evaluate(net, val, val_cands.per_image, rcfg, cfg.min_gate_px)
+            score = _score(metrics)
+            row = {"epoch": epoch + 1, "seconds": round(time.perf_counter() - t0, 1),
+                   "loss": losses, "val": metrics, "score": round(score, 4)}  # fmt: skip
+            history.append(row)
+            for k, v in losses.items():
+                writer.add_scalar(f"refine_loss/{k}", v, epoch + 1)
+            writer.add_scalar("refine_val/score", score, epoch + 1)
+            writer.flush()
+            if score > best[0]:
+                best = (score, epoch + 1, metrics)
+                save(best_dir, epoch + 1, {"val": metrics})
+            save_last(epoch + 1)
+            completed = epoch + 1
+            atomic_write_json(out / "history.json", history)
+            if log is not None:
+                m = metrics
+                log(f"epoch {epoch + 1}: loss {losses['loss']:.3f}  val precision "
+                    f"{m['precision']}  recall {m['recall']}  median corner error "
+                    f"{m['corner_error_px']['median']} px  PCK@2px {m['pck']['2px']}  "
+                    f"PCK@5px {m['pck']['5px']}  ({row['seconds']} s)")  # fmt: skip
+    except KeyboardInterrupt:
+        save_last(completed)
+        raise
+    finally:
+        if bar is not None:
+            bar.stop()
+        writer.close()
+    _, _, best_meta = load_checkpoint(best_dir)
+    best_net = load_refiner(best_dir, best_meta)
+    if cfg.tune:
+        tuned, metrics = tune(best_net, val, val_cands.per_image, best_net.cfg, cfg.min_gate_px)
+        best_net = RefineNet(tuned)
+        best_net.load_state_dict(load_refiner(best_dir, best_meta).state_dict())
+        net = best_net.eval()
+        done = best_meta["refine_training"]
+        save(best_dir, done["epoch"], {"val": metrics, "val_untuned": done.get("val")})
+        best = (best[0], best[1], metrics)
+        if log is not None:
+            log(f"gate threshold and snap radius tuned on val: {tuned}")
+    export_refiner_onnx(best_net, out / REFINER_ONNX)
+    return RefineResult(out, best[1], best[2], history)

@@ -1,0 +1,228 @@
+"""The detector's second stage: rectified patches, corner corrections, training and checkpoints."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.cnn import CnnDetector
+from icarus_vision.gate_detect.cnn import refine_train as rt
+from icarus_vision.gate_detect.cnn.augment import FLIP_ORDER
+from icarus_vision.gate_detect.cnn.checkpoint import (
+    export_refiner_onnx,
+    load_checkpoint,
+    load_refiner,
+    save_checkpoint,
+)
+from icarus_vision.gate_detect.cnn.data import load_split
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig
+from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.refine import (
+    RefineConfig,
+    RefineNet,
+    corners_to_offsets,
+    extract,
+    homographies,
+    offsets_to_corners,
+    refine,
+    snap_to_peaks,
+    square,
+    usable,
+)
+
+from .conftest import TINY_MODEL
+
+CFG = RefineConfig(patch=40, margin=8)
+QUAD = np.array([[100.0, 60.0], [190.0, 70.0], [185.0, 160.0], [95.0, 150.0]])
+
+
+def _gate_image() -> np.ndarray:
+    """An orange frame on grey whose opening is QUAD."""
+    img = np.full((240, 320, 3), 110, np.uint8)
+    centre = QUAD.mean(axis=0)
+    outer = centre + 1.3 * (QUAD - centre)
+    cv2.fillPoly(img, [np.round(outer).astype(np.int32)], (255, 90, 0))
+    cv2.fillPoly(img, [np.round(QUAD).astype(np.int32)], (110, 110, 110))
+    return img
+
+
+def test_homography_puts_the_candidate_on_the_square_and_back():
+    h = homographies(QUAD[None], CFG)
+    np.testing.assert_allclose(corners_to_offsets(h, QUAD[None], CFG), 0.0, atol=1e-9)
+    truth = QUAD + np.array([[3.0, -2.0], [0.0, 4.0], [-5.0, 1.0], [2.0, 2.0]])
+    off = corners_to_offsets(h, truth[None], CFG)
+    np.testing.assert_allclose(offsets_to_corners(h, off, CFG)[0], truth, atol=1e-6)
+
+
+def test_patch_shows_the_opening_on_the_square_and_the_frame_around_it():
+    patch = extract(_gate_image(), homographies(QUAD[None], CFG), CFG)[0]
+    lo, hi = square(CFG)[0, 0], square(CFG)[2, 0]
+    inside = patch[int(lo) + 3 : int(hi) - 2, int(lo) + 3 : int(hi) - 2]
+    assert (inside == 110).all()
+    mid = CFG.patch // 2
+    for y, x in [(int(lo) - 2, mid), (int(hi) + 3, mid), (mid, int(lo) - 2), (mid, int(hi) + 3)]:
+        assert tuple(patch[y, x]) == (255, 90, 0), (y, x)
+
+
+def test_corner_order_swapped_gives_the_mirrored_patch():
+    img = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    a = extract(img, homographies(QUAD[None], CFG), CFG)[0].astype(int)
+    b = extract(img, homographies(QUAD[None][:, FLIP_ORDER], CFG), CFG)[0].astype(int)
+    assert np.abs(a[:, ::-1] - b).max() <= 1
+
+
+def test_usable_refuses_degenerate_candidates():
+    bad = [QUAD[[1, 0, 3, 2]], QUAD[[0, 2, 1, 3]], QUAD * 0.01 + 5, np.full((4, 2), np.nan)]
+    assert usable(np.array([QUAD, *bad])).tolist() == [True, False, False, False, False]
+
+
+def test_label_matches_near_candidates_only():
+    truth = np.array([QUAD, QUAD + 150.0])
+    near, far = QUAD + 4.0, QUAD + 70.0
+    t = rt.label(np.array([near, far]), truth)
+    np.testing.assert_array_equal(t[0], QUAD)
+    assert np.isnan(t[1]).all()
+
+
+def test_snap_moves_a_corner_to_a_close_peak_of_its_type_only():
+    peaks = [(np.array([[101.0, 61.0]]), np.array([0.9]))] + [
+        (np.array([[100.0, 60.0]]), np.array([0.8]))
+    ] + [(np.zeros((0, 2)), np.zeros(0))] * 2  # fmt: skip
+    out, s = snap_to_peaks(QUAD[None], peaks, RefineConfig(snap=0.05))
+    np.testing.assert_array_equal(out[0, 0], [101.0, 61.0])  # TL: within 5 % of the side
+    np.testing.assert_array_equal(out[0, 1], QUAD[1])  # TR's peak is far away
+    assert s[0].tolist() == [0.9, 0.0, 0.0, 0.0]
+
+
+def test_a_few_training_steps_lower_the_loss():
+    """Jittered gates (to correct) and random quads (no gate) of one drawn image."""
+    rng = np.random.default_rng(0)
+    img = _gate_image()[None]
+    n = 64
+    q = QUAD + rng.normal(size=(n, 4, 2)) * 6.0
+    # squares of 30 px somewhere on the grey background, above the gate
+    neg = np.array([[0, 0], [30, 0], [30, 30], [0, 30]]) + rng.uniform([0, 0], [280, 15], (n, 1, 2))
+    quads = np.concatenate([q, neg])
+    targets = np.concatenate([np.repeat(QUAD[None], n, 0), np.full((n, 4, 2), np.nan)])
+    scores = np.full((2 * n, 3), 0.5, np.float32)
+    x, geom, lab, off = rt.make_batch(img, np.zeros(2 * n, int), quads, targets,
+                                      scores, CFG, None)  # fmt: skip
+    torch.manual_seed(0)
+    net = RefineNet(CFG)
+    opt = torch.optim.Adam(net.parameters(), 3e-3)
+    real = torch.ones(2 * n, dtype=torch.bool)
+    losses = []
+    for _ in range(30):
+        loss = rt.loss_terms(net(x, geom), lab, off, real)["loss"]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert losses[-1] < 0.5 * losses[0]
+
+
+def _refiner(seed: int = 0) -> RefineNet:
+    torch.manual_seed(seed)
+    net = RefineNet(CFG).eval()
+    with torch.no_grad():  # a refiner that believes in every candidate
+        net.out.bias[0] = 5.0
+    return net
+
+
+def test_refine_reports_corrected_gates_best_first_without_duplicates():
+    img = _gate_image()
+    cands = [(QUAD, np.ones(4), 0.9), (QUAD + 1.0, np.ones(4), 0.8)]
+    peaks = [(np.zeros((0, 2)), np.zeros(0))] * 4
+    found = refine(_refiner(), img, cands, peaks, CFG)
+    assert len(found) == 1  # the second overlaps the first
+    corners, cs, p = found[0]
+    assert corners.shape == (4, 2) and cs.shape == (4,) and 0.5 < p <= 1.0
+    assert refine(_refiner(), img, [], peaks, CFG) == []
+
+
+def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
+    onnx = pytest.importorskip("onnx")
+    from onnx.reference import ReferenceEvaluator
+
+    net = _refiner(3)
+    torch.manual_seed(1)
+    corner = CornerNet(TINY_MODEL).eval()
+    save_checkpoint(tmp_path / "ck", corner, DecodeConfig(), {}, net, {"note": "r"})
+    _, _, meta = load_checkpoint(tmp_path / "ck")
+    loaded = load_refiner(tmp_path / "ck", meta)
+    assert loaded.cfg == CFG and meta["refine_training"]["note"] == "r"
+    x, g = torch.rand(3, 3, 40, 40), torch.rand(3, 11)
+    with torch.no_grad():
+        a = net(x, g)
+        assert torch.equal(a, loaded(x, g))
+    export_refiner_onnx(loaded, tmp_path / "r.onnx")
+    sess = ReferenceEvaluator(onnx.load(str(tmp_path / "r.onnx")))
+    y = sess.run(None, {"patches": x.numpy(), "geometry": g.numpy()})[0]
+    np.testing.assert_allclose(y, a.numpy(), atol=1e-4)
+    # frozen (batch norm folded, traced) and eager detectors agree
+    img = _gate_image()
+    dets = [CnnDetector(corner, DecodeConfig(centre_threshold=0.0), refiner=loaded, frozen=f)
+            for f in (True, False)]  # fmt: skip
+    a, b = (d.detect(img) for d in dets)
+    assert len(a) == len(b)
+    for p, q in zip(a, b, strict=True):
+        np.testing.assert_allclose(p.corners, q.corners, atol=1e-3)
+
+
+def test_missing_or_corrupt_refiner_names_the_file(tmp_path):
+    save_checkpoint(tmp_path / "ck", CornerNet(TINY_MODEL), DecodeConfig(), {}, _refiner())
+    (tmp_path / "ck" / "refiner.safetensors").write_bytes(b"garbage")
+    with pytest.raises(ValueError, match="refiner.safetensors"):
+        make_detector(f"cnn:{tmp_path / 'ck'}")
+    (tmp_path / "ck" / "refiner.safetensors").unlink()
+    with pytest.raises(FileNotFoundError, match="refiner.safetensors"):
+        make_detector(f"cnn:{tmp_path / 'ck'}")
+
+
+def _first_stage(tmp_path):
+    torch.manual_seed(0)
+    return save_checkpoint(tmp_path / "first", CornerNet(TINY_MODEL).eval(), DecodeConfig())
+
+
+def test_train_refiner_saves_on_ctrl_c_and_resumes_exactly(tiny_dataset, tmp_path):
+    from safetensors.torch import load_file
+
+    first = _first_stage(tmp_path)
+    cfg = rt.RefineTrainConfig(batch_size=16, tune=False)
+    kw = {"refine_config": RefineConfig(patch=16, margin=4), "progress": False}
+
+    def interrupt(line: str) -> None:
+        if line.startswith("epoch"):
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=2, config=cfg,
+                         log=interrupt, **kw)  # fmt: skip
+    with pytest.raises(ValueError, match="--resume"):
+        rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=2, config=cfg, **kw)
+    rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=2, resume=True, progress=False)
+    rt.train_refiner(first, tiny_dataset, tmp_path / "b", epochs=2, config=cfg, **kw)
+    for kept in ("last", "best"):
+        a, b = (load_file(tmp_path / r / kept / "refiner.safetensors") for r in "ab")
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    meta = json.loads((tmp_path / "a" / "best" / "detector.json").read_text())
+    assert meta["refine"]["patch"] == 16 and meta["refine_training"]["config"]["batch_size"] == 16
+    assert (tmp_path / "a" / "refiner.onnx").is_file()
+    assert [h["epoch"] for h in json.loads((tmp_path / "a" / "history.json").read_text())] == [1, 2]
+    det = make_detector(f"cnn:{tmp_path / 'a' / 'best'}")
+    assert det.refiner is not None
+    assert isinstance(det.detect(np.zeros((120, 160, 3), np.uint8)), list)
+
+
+def test_jittered_truth_and_candidates_of_a_split(tiny_dataset):
+    split = load_split(tiny_dataset, "train", (160, 120))
+    idx, q, t = rt.jittered_truth(split, np.random.default_rng(0), min_side_px=4.0)
+    assert len(idx) == len(q) == len(t) > 0 and usable(q).all()
+    # each jittered gate stays near (MATCH) the gate it came from, in its image
+    d = np.linalg.norm(q - t, axis=-1).mean(axis=1) / rt._side(t)
+    assert np.median(d) < rt.MATCH
