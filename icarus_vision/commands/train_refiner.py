@@ -13,10 +13,11 @@ from icarus_vision.cli import app, console, user_errors
 @app.command("train-refiner")
 @user_errors
 def train_refiner_cmd(
-    data: Path = typer.Option(
+    data: list[Path] = typer.Option(
         ...,
         help="gen-dataset output (train and val splits), ideally generated with a seed the "
-        "first stage was not trained on.",
+        "first stage was not trained on; repeat to train on several (the first one's val split "
+        "validates).",
     ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, refiner.onnx, tb/."),
     detector: Path = typer.Option(

@@ -110,7 +110,7 @@ def test_a_few_training_steps_lower_the_loss():
     quads = np.concatenate([q, neg])
     targets = np.concatenate([np.repeat(QUAD[None], n, 0), np.full((n, 4, 2), np.nan)])
     scores = np.full((2 * n, 3), 0.5, np.float32)
-    x, geom, lab, off = rt.make_batch(img, np.zeros(2 * n, int), quads, targets,
+    x, geom, lab, off, w = rt.make_batch(img, np.zeros(2 * n, int), quads, targets,
                                       scores, CFG, None)  # fmt: skip
     torch.manual_seed(0)
     net = RefineNet(CFG)
@@ -118,7 +118,7 @@ def test_a_few_training_steps_lower_the_loss():
     real = torch.ones(2 * n, dtype=torch.bool)
     losses = []
     for _ in range(30):
-        loss = rt.loss_terms(net(x, geom), lab, off, real)["loss"]
+        loss = rt.loss_terms(net(x, geom), lab, off, real, w)["loss"]
         opt.zero_grad()
         loss.backward()
         opt.step()

@@ -1,4 +1,5 @@
-"""`train-detector` and `eval-detector` on the command line: help, a run, one-line errors."""
+"""`train-detector`, `train-refiner` and `eval-detector` on the command line: help, a run,
+one-line errors."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from icarus_vision.cli import app
 runner = CliRunner()
 
 
-@pytest.mark.parametrize("cmd", ["train-detector", "eval-detector"])
+@pytest.mark.parametrize("cmd", ["train-detector", "train-refiner", "eval-detector"])
 def test_help(cmd):
     r = runner.invoke(app, [cmd, "--help"])
     assert r.exit_code == 0 and "--data" in r.output
@@ -54,6 +55,19 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
             "--widths",
         ),
         (["train-detector", "--data", "{data}", "--out", "{tmp}/o", "--widths", "a,b,c,d"], "a,b"),
+        (["train-refiner", "--data", "{tmp}/missing", "--out", "{tmp}/o"], "missing"),
+        (
+            ["train-refiner", "--data", "{data}", "--out", "{tmp}/o", "--resume"],
+            "nothing to resume",
+        ),
+        (
+            ["train-refiner", "--data", "{data}", "--out", "{tmp}/o", "--patch", "20"],
+            "multiple of 8",
+        ),
+        (
+            ["train-refiner", "--data", "{data}", "--out", "{tmp}/o", "--detector", "{tmp}/none"],
+            "none",
+        ),
     ],
 )
 def test_errors_are_one_line(tiny_dataset, tmp_path, args, needle):

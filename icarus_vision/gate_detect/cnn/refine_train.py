@@ -49,6 +49,10 @@ MATCH = 0.5
 """A candidate is a gate when its mean corner distance to a labelled gate is at most this
 fraction of that gate's mean side (looser than eval-detector's rule: the refiner can move the
 corners there, and duplicates of one gate fall to the overlap test once corrected)."""
+SMALL_PX = 16.0
+"""Examples whose candidate is smaller than this (mean side, pixels) weigh ``SMALL_WEIGHT`` in the
+loss: eval-detector counts no gate under 20 px, and their labels are the noisiest."""
+SMALL_WEIGHT = 0.25
 JITTER = (0.02, 0.15)
 """Corner noise of the jittered labelled gates: per gate, a standard deviation drawn from this
 range, as a fraction of the gate's side."""
@@ -147,9 +151,10 @@ def make_batch(
     cfg: RefineConfig,
     rng: np.random.Generator | None,
 ):
-    """Patches, geometry inputs, labels (N,) and offset targets (N, 8) (NaN rows: no gate) of
-    some examples; with ``rng``, augmented (module docstring)."""
+    """Patches, geometry inputs, labels (N,), offset targets (N, 8) (NaN rows: no gate) and loss
+    weights (N,) of some examples; with ``rng``, augmented (module docstring)."""
     quads, targets = quads.copy(), targets.copy()
+    weight = np.where(_side(quads) >= SMALL_PX, 1.0, SMALL_WEIGHT).astype(np.float32)
     w = images.shape[2]
     flip = np.zeros(len(quads), bool)
     if rng is not None:
@@ -180,21 +185,31 @@ def make_batch(
     seen = quads.copy()  # a mirrored candidate is where its mirror image would be
     seen[flip, :, 0] = w - 1 - seen[flip, :, 0]
     geom = torch.from_numpy(geometry(seen, scores, (w, images.shape[1])))
-    return x, geom, torch.from_numpy(gate.astype(np.float32)), torch.from_numpy(off).float()
+    label = torch.from_numpy(gate.astype(np.float32))
+    return x, geom, label, torch.from_numpy(off).float(), torch.from_numpy(weight)
 
 
 def loss_terms(
-    out: torch.Tensor, label: torch.Tensor, off: torch.Tensor, real: torch.Tensor
+    out: torch.Tensor,
+    label: torch.Tensor,
+    off: torch.Tensor,
+    real: torch.Tensor,
+    weight: torch.Tensor | None = None,
 ) -> dict:
     """Gate BCE over the real candidates (``real`` (N,) bool), smooth-L1 corner offsets over the
-    gates (offsets within one side)."""
+    gates (offsets within one side), each a mean weighted by ``weight`` (N,) (default 1)."""
+    w = torch.ones_like(label) if weight is None else weight
     cls = torch.zeros((), dtype=out.dtype)
     if real.any():
-        cls = torch.nn.functional.binary_cross_entropy_with_logits(out[real, 0], label[real])
+        bce = torch.nn.functional.binary_cross_entropy_with_logits(
+            out[real, 0], label[real], reduction="none"
+        )
+        cls = (w[real] * bce).sum() / w[real].sum()
     use = torch.isfinite(off).all(dim=1) & (off.abs() <= 1.0).all(dim=1)
     reg = torch.zeros((), dtype=out.dtype)
     if use.any():
-        reg = torch.nn.functional.smooth_l1_loss(out[use, 1:], off[use], beta=0.02)
+        l1 = torch.nn.functional.smooth_l1_loss(out[use, 1:], off[use], beta=0.02, reduction="none")
+        reg = (w[use] * l1.mean(dim=1)).sum() / w[use].sum()
     return {"loss": cls + 10.0 * reg, "gate": cls, "corners": reg}
 
 
@@ -267,10 +282,10 @@ def train_epoch(
     n = 0
     for s in range(0, len(order), batch_size):
         b = order[s : s + batch_size]
-        x, geom, lab, off = make_batch(
+        x, geom, lab, off, w = make_batch(
             split.images, idx[b], quads[b], targets[b], scores[b], cfg, rng
         )
-        terms = loss_terms(net(x, geom), lab, off, torch.from_numpy(real[b]))
+        terms = loss_terms(net(x, geom), lab, off, torch.from_numpy(real[b]), w)
         opt.zero_grad(set_to_none=True)
         terms["loss"].backward()
         opt.step()
@@ -315,9 +330,23 @@ class RefineResult:
     history: list[dict]
 
 
+def concat_splits(splits: list[Split]) -> Split:
+    """One split holding the images and labels of several (same camera size)."""
+    sizes = {s.image_size for s in splits}
+    if len(sizes) != 1:
+        raise ValueError(f"datasets of different image sizes cannot be combined: {sorted(sizes)}")
+    return Split(
+        [f for s in splits for f in s.files],
+        np.concatenate([s.images for s in splits]),
+        [g for s in splits for g in s.gates],
+        [i for s in splits for i in s.image_info],
+        splits[0].image_size,
+    )
+
+
 def train_refiner(
     detector: str | Path,
-    data_dir: str | Path,
+    data_dir: str | Path | list[str | Path],
     out_dir: str | Path,
     epochs: int = 12,
     seed: int = 0,
@@ -340,7 +369,8 @@ def train_refiner(
             is ignored.
         data_dir: gen-dataset output, ideally generated with a seed the first stage was not
             trained on (its candidates' errors are then those of unseen images): its ``train``
-            split is trained on, its ``val`` split validates and tunes.
+            split is trained on, its ``val`` split validates and tunes. Several: the train
+            splits of all are trained on, the first one's val split validates.
         out_dir: output folder.
         epochs: total epochs (a resumed run continues to this number).
         seed: seed of weights, shuffling and augmentation.
@@ -388,8 +418,11 @@ def train_refiner(
         )
     first = fuse_batchnorm(copy.deepcopy(corner_net).eval())
     size = tuple(corner_net.cfg.image_size)
-    train = load_split(data_dir, "train", size, cfg.limit)
-    val = load_split(data_dir, "val", size, cfg.limit)
+    dirs = list(data_dir) if isinstance(data_dir, list | tuple) else [data_dir]
+    if not dirs:
+        raise ValueError("no training data given")
+    train = concat_splits([load_split(d, "train", size, cfg.limit) for d in dirs])
+    val = load_split(dirs[0], "val", size, cfg.limit)
     if log is not None:
         log(f"first-stage candidates of {len(train.files)} + {len(val.files)} images ...")
     cands, val_cands = collect(first, train), collect(first, val)
@@ -411,7 +444,7 @@ def train_refiner(
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(str(out / "tb"))
-    info = {"detector": str(detector), "data": str(data_dir), "config": asdict(cfg)}
+    info = {"detector": str(detector), "data": [str(d) for d in dirs], "config": asdict(cfg)}
     first_info = meta.get("training", {})
 
     def save(folder: Path, epoch: int, extra: dict | None = None) -> None:
