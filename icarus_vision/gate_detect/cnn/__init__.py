@@ -118,11 +118,13 @@ class CnnDetector(Detector):
             # score is at most the centre's), so none is decoded: the same output, faster.
             floor = max(decode_cfg.centre_threshold, refiner.cfg.threshold)
             self.decode_cfg = replace(decode_cfg, centre_threshold=floor)
+            # channels-last like the patches it reads (refine.to_tensor makes no copy)
             self.refiner = fuse_batchnorm(copy.deepcopy(refiner).eval())
+            self.refiner = self.refiner.to(memory_format=torch.channels_last)
             if frozen:
                 p = refiner.cfg.patch
-                example = (torch.zeros(2, 3, p, p), torch.zeros(2, NUM_GEOM))
-                self.refiner = frozen_trace(self.refiner, example)
+                patches = torch.zeros(2, p, p, 3).permute(0, 3, 1, 2)
+                self.refiner = frozen_trace(self.refiner, (patches, torch.zeros(2, NUM_GEOM)))
 
     @property
     def model(self) -> nn.Module:

@@ -12,6 +12,7 @@ with the patch), with brightness, contrast and noise jitter.
 from __future__ import annotations
 
 import copy
+import ctypes
 import json
 import os
 import time
@@ -79,6 +80,18 @@ class Candidates:
     per_image: list
 
 
+def _release_free_memory() -> None:
+    """Hand freed heap memory back to the system (glibc ``malloc_trim``; elsewhere nothing).
+
+    Decoding thousands of images keeps a few small arrays of each alive among large freed
+    buffers; glibc then keeps the whole heap, about 1 MB per image (20,000 training images ran
+    out of 24 GB). Trimming after each batch keeps it at a few kB per image."""
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
 def first_stage(model: torch.nn.Module, images: np.ndarray, cfg: DecodeConfig, batch: int = 32):
     """Per image ``(gates, peaks)`` of the corner network (eval) decoded with ``cfg``."""
     out = []
@@ -89,6 +102,8 @@ def first_stage(model: torch.nn.Module, images: np.ndarray, cfg: DecodeConfig, b
             for m, im in zip(maps, images[i : i + batch], strict=True):
                 scale = (im.shape[1] / m.shape[-1], im.shape[0] / m.shape[-2])
                 out.append(decode(m.float(), cfg, scale, with_peaks=True))
+            del x, maps
+            _release_free_memory()
     return out
 
 
