@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import copy
 import ctypes
-import json
-import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
@@ -407,20 +405,19 @@ def train_refiner(
         save_checkpoint,
     )
     from icarus_vision.gate_detect.cnn.data import load_split
-    from icarus_vision.gate_detect.cnn.train import _progress_bar
+    from icarus_vision.gate_detect.cnn.train import (
+        _progress_bar,
+        load_state,
+        run_folders,
+        save_state,
+    )
     from icarus_vision.gate_detect.cnn.tune import score as _score
 
     cfg = replace(config or RefineTrainConfig(), epochs=epochs, seed=seed)
     if cfg.epochs < 1:
         raise ValueError(f"epochs must be >= 1, got {cfg.epochs}")
     out = Path(out_dir)
-    last_dir, best_dir = out / "last", out / "best"
-    if resume and not (last_dir / STATE).is_file():
-        raise FileNotFoundError(f"{last_dir / STATE}: nothing to resume")
-    if not resume and (last_dir / STATE).is_file():
-        raise ValueError(
-            f"{out} already holds a training run; pass --resume or choose another --out"
-        )
+    last_dir, best_dir = run_folders(out, resume, STATE)
     corner_net, _, meta = load_checkpoint(last_dir if resume else detector)
     torch.manual_seed(cfg.seed)
     net = RefineNet(refine_config or RefineConfig())
@@ -451,11 +448,7 @@ def train_refiner(
     )
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
-        st = torch.load(last_dir / STATE, weights_only=True)
-        opt.load_state_dict(st["optimizer"])
-        sched.load_state_dict(st["scheduler"])
-        start, history = int(st["epoch"]), json.loads(st["history"])
-        best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
+        start, history, best, _ = load_state(last_dir / STATE, opt, sched)
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(str(out / "tb"))
@@ -468,12 +461,7 @@ def train_refiner(
 
     def save_last(epoch: int) -> None:
         save(last_dir, epoch)
-        state = {"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
-                 "history": json.dumps(history), "best_score": best[0], "best_epoch": best[1],
-                 "best_metrics": json.dumps(best[2])}  # fmt: skip
-        tmp = last_dir / f".{STATE}.tmp"
-        torch.save(state, tmp)
-        os.replace(tmp, last_dir / STATE)
+        save_state(last_dir / STATE, opt, sched, epoch, history, best)
 
     bar = _progress_bar() if progress else None
     completed = start

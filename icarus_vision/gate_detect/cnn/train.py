@@ -116,13 +116,7 @@ def train_detector(
     if cfg.epochs < 1:
         raise ValueError(f"epochs must be >= 1, got {cfg.epochs}")
     out = Path(out_dir)
-    last_dir, best_dir = out / "last", out / "best"
-    if resume and not (last_dir / STATE).is_file():
-        raise FileNotFoundError(f"{last_dir / STATE}: nothing to resume")
-    if not resume and (last_dir / STATE).is_file():
-        raise ValueError(
-            f"{out} already holds a training run; pass --resume or choose another --out"
-        )
+    last_dir, best_dir = run_folders(out, resume, STATE)
     torch.manual_seed(cfg.seed)
     mcfg = model_config or ModelConfig()
     model = CornerNet(mcfg)
@@ -146,13 +140,9 @@ def train_detector(
     ema = _moving_average(model, cfg.ema_decay)
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
-        st = torch.load(last_dir / STATE, weights_only=True)
-        opt.load_state_dict(st["optimizer"])
-        sched.load_state_dict(st["scheduler"])
+        start, history, best, st = load_state(last_dir / STATE, opt, sched)
         if ema is not None:
             ema.load_state_dict(st["ema"])
-        start, history = int(st["epoch"]), json.loads(st["history"])
-        best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
     gen = torch.Generator()
     ds = GateDataset(train, grid, augment=True, seed=cfg.seed, ignore_below_px=cfg.ignore_below_px)
     loader = DataLoader(ds, cfg.batch_size, shuffle=True, generator=gen, drop_last=False)
@@ -163,14 +153,8 @@ def train_detector(
 
     def save_last(epoch: int) -> None:
         save_checkpoint(last_dir, model, decode_cfg, {**info, "epoch": epoch})
-        state = {"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
-                 "history": json.dumps(history), "best_score": best[0], "best_epoch": best[1],
-                 "best_metrics": json.dumps(best[2])}  # fmt: skip
-        if ema is not None:
-            state["ema"] = ema.state_dict()
-        tmp = last_dir / f".{STATE}.tmp"
-        torch.save(state, tmp)
-        os.replace(tmp, last_dir / STATE)
+        extra = {} if ema is None else {"ema": ema.state_dict()}
+        save_state(last_dir / STATE, opt, sched, epoch, history, best, extra)
 
     bar = _progress_bar() if progress else None
     completed = start
@@ -244,6 +228,46 @@ def train_detector(
             log(f"decoding thresholds tuned on val: {tuned}")
     export_onnx(best_model, out / "model.onnx")
     return TrainResult(out, len(history), best[1], best[2], history)
+
+
+def run_folders(out: Path, resume: bool, state: str) -> tuple[Path, Path]:
+    """``(OUT/last, OUT/best)`` of a training run, checked against ``resume``.
+
+    Raises:
+        FileNotFoundError: ``resume`` without ``OUT/last/<state>``.
+        ValueError: a new run where one already is.
+    """
+    last_dir, best_dir = out / "last", out / "best"
+    if resume and not (last_dir / state).is_file():
+        raise FileNotFoundError(f"{last_dir / state}: nothing to resume")
+    if not resume and (last_dir / state).is_file():
+        raise ValueError(
+            f"{out} already holds a training run; pass --resume or choose another --out"
+        )
+    return last_dir, best_dir
+
+
+def save_state(
+    path: Path, opt, sched, epoch: int, history: list, best: tuple, extra: dict | None = None
+) -> None:
+    """Write what a resumed run needs (optimizer, schedule, epoch, history, best so far) to
+    ``path`` atomically; tensors and strings only, so it loads with ``weights_only=True``."""
+    state = {"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
+             "history": json.dumps(history), "best_score": best[0], "best_epoch": best[1],
+             "best_metrics": json.dumps(best[2]), **(extra or {})}  # fmt: skip
+    tmp = path.with_name(f".{path.name}.tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_state(path: Path, opt, sched) -> tuple[int, list, tuple, dict]:
+    """Restore ``opt`` and ``sched`` from :func:`save_state`'s file; returns (epochs done,
+    history, (best score, best epoch, best metrics), the whole state)."""
+    st = torch.load(path, weights_only=True)
+    opt.load_state_dict(st["optimizer"])
+    sched.load_state_dict(st["scheduler"])
+    best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
+    return int(st["epoch"]), json.loads(st["history"]), best, st
 
 
 def _moving_average(model: CornerNet, decay: float) -> torch.optim.swa_utils.AveragedModel | None:
