@@ -515,9 +515,10 @@ def train_refiner(
         tuned, metrics = tune(best_net, val, val_cands.per_image, best_net.cfg, cfg.min_gate_px)
         best_net = RefineNet(tuned)
         best_net.load_state_dict(load_refiner(best_dir, best_meta).state_dict())
-        net = best_net.eval()
-        done = best_meta["refine_training"]
-        save(best_dir, done["epoch"], {"val": metrics, "val_untuned": done.get("val")})
+        net = best_net.eval()  # what save() writes
+        done = best_meta["refine_training"]  # a finished run resumed is only tuned again
+        untuned = done.get("val_untuned", done.get("val"))
+        save(best_dir, done["epoch"], {"val": metrics, "val_untuned": untuned})
         best = (best[0], best[1], metrics)
         if log is not None:
             log(f"gate threshold and snap radius tuned on val: {tuned}")
