@@ -61,13 +61,17 @@ def train_detector_cmd(
         config=TrainConfig(ignore_below_px=ignore_below_px, ema_decay=ema_decay),
         log=lambda s: console.print(s),
     )  # fmt: skip
-    m = result.best_metrics
+    print_best(result.best_epoch, result.best_metrics, out, "best/, last/, model.onnx")
+
+
+def print_best(epoch: int, m: dict, out: Path, files: str) -> None:
+    """The closing lines of a training command: the best epoch's figures and what was written."""
     console.print(
-        f"best epoch {result.best_epoch}: precision {m.get('precision')}, recall "
+        f"best epoch {epoch}: precision {m.get('precision')}, recall "
         f"{m.get('recall')}, median corner error {m.get('corner_error_px', {}).get('median')} px",
         highlight=False,
     )
-    console.print(f"checkpoints written to {escape(str(out))}/ (best/, last/, model.onnx)")
+    console.print(f"checkpoints written to {escape(str(out))}/ ({files})")
 
 
 def _widths(text: str) -> tuple[int, int, int, int]:

@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import typer
-from rich.markup import escape
 
 from icarus_vision.cli import app, console, user_errors
+from icarus_vision.commands.train_detector import print_best
 
 
 @app.command("train-refiner")
@@ -49,10 +49,4 @@ def train_refiner_cmd(
         resume=resume, refine_config=RefineConfig(patch=patch),
         log=lambda s: console.print(s, highlight=False),
     )  # fmt: skip
-    m = result.best_metrics
-    console.print(
-        f"best epoch {result.best_epoch}: precision {m.get('precision')}, recall "
-        f"{m.get('recall')}, median corner error {m.get('corner_error_px', {}).get('median')} px",
-        highlight=False,
-    )
-    console.print(f"checkpoints written to {escape(str(out))}/ (best/, last/, refiner.onnx)")
+    print_best(result.best_epoch, result.best_metrics, out, "best/, last/, refiner.onnx")

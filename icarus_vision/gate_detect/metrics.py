@@ -24,10 +24,15 @@ SIZE_BINS_PX = (0.0, 20.0, 40.0, 80.0, 160.0, np.inf)
 """Edges of the apparent-size breakdown (mean side of the opening), pixels."""
 
 
+def mean_sides(quads: np.ndarray) -> np.ndarray:
+    """Mean side lengths of (..., 4, 2) quadrilaterals -> (...), pixels (NaN where a corner is)."""
+    q = np.asarray(quads, float)
+    return np.linalg.norm(q - np.roll(q, -1, axis=-2), axis=-1).mean(axis=-1)
+
+
 def mean_side(corners: np.ndarray) -> float:
     """Mean side length of a (4, 2) quadrilateral, pixels (NaN if a corner is NaN)."""
-    c = np.asarray(corners, float)
-    return float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).mean())
+    return float(mean_sides(corners))
 
 
 def match(

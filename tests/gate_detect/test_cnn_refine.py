@@ -34,6 +34,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     square,
     usable,
 )
+from icarus_vision.gate_detect.metrics import mean_sides
 
 from .conftest import TINY_MODEL
 
@@ -224,5 +225,5 @@ def test_jittered_truth_and_candidates_of_a_split(tiny_dataset):
     idx, q, t = rt.jittered_truth(split, np.random.default_rng(0), min_side_px=4.0)
     assert len(idx) == len(q) == len(t) > 0 and usable(q).all()
     # each jittered gate stays near (MATCH) the gate it came from, in its image
-    d = np.linalg.norm(q - t, axis=-1).mean(axis=1) / rt._side(t)
+    d = np.linalg.norm(q - t, axis=-1).mean(axis=1) / mean_sides(t)
     assert np.median(d) < rt.MATCH

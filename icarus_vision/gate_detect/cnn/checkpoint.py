@@ -94,13 +94,17 @@ def load_checkpoint(path: str | Path) -> tuple[CornerNet, DecodeConfig, dict]:
         decode = DecodeConfig(**meta.get("decode", {}))
     except (ValueError, KeyError, TypeError) as e:
         raise ValueError(f"{cfg_path}: not a valid detector config ({e})") from None
+    _load_weights(model, w_path, "detector")
+    return model.eval(), decode, meta
+
+
+def _load_weights(module: torch.nn.Module, path: Path, what: str) -> None:
+    """Load safetensors weights into ``module`` (strict); a bad file is a ValueError naming it."""
     try:
-        state = load_file(str(w_path))
-        model.load_state_dict(state, strict=True)
+        module.load_state_dict(load_file(str(path)), strict=True)
     except (SafetensorError, RuntimeError, OSError, ValueError) as e:
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise ValueError(f"{w_path}: corrupt or incompatible detector weights ({msg})") from None
-    return model.eval(), decode, meta
+        raise ValueError(f"{path}: corrupt or incompatible {what} weights ({msg})") from None
 
 
 def load_refiner(path: str | Path, meta: dict) -> RefineNet | None:
@@ -123,57 +127,38 @@ def load_refiner(path: str | Path, meta: dict) -> RefineNet | None:
         net = RefineNet(RefineConfig.from_dict(meta["refine"]))
     except (ValueError, KeyError, TypeError) as e:
         raise ValueError(f"{folder / CONFIG}: not a valid refiner config ({e})") from None
-    try:
-        net.load_state_dict(load_file(str(w_path)), strict=True)
-    except (SafetensorError, RuntimeError, OSError, ValueError) as e:
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise ValueError(f"{w_path}: corrupt or incompatible refiner weights ({msg})") from None
+    _load_weights(net, w_path, "refiner")
     return net.eval()
+
+
+def _export(module: torch.nn.Module, inputs: tuple, path: str | Path, **names) -> Path:
+    """Export ``module`` (eval mode for the export) on example ``inputs`` to ONNX at ``path``,
+    atomically; ``names``: ``input_names``, ``output_names``, ``dynamic_axes``."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    was_training = module.training
+    module.eval()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(module, inputs, str(tmp), dynamo=False, opset_version=17, **names)
+    os.replace(tmp, path)
+    module.train(was_training)
+    return path
 
 
 def export_onnx(model: CornerNet, path: str | Path) -> Path:
     """Export the network (input ``image`` (1, 3, h, w) in [0, 1], output ``maps``) to ONNX."""
-    path = Path(path)
     w, h = model.cfg.input_size
-    tmp = path.with_name(f".{path.name}.tmp")
-    was_training = model.training
-    model.eval()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        torch.onnx.export(
-            model,
-            (torch.zeros(1, 3, h, w),),
-            str(tmp),
-            dynamo=False,
-            input_names=["image"],
-            output_names=["maps"],
-            opset_version=17,
-        )
-    os.replace(tmp, path)
-    model.train(was_training)
-    return path
+    inputs = (torch.zeros(1, 3, h, w),)
+    return _export(model, inputs, path, input_names=["image"], output_names=["maps"])
 
 
 def export_refiner_onnx(net: RefineNet, path: str | Path) -> Path:
     """Export the refiner (inputs ``patches`` (N, 3, P, P) in [0, 1] and ``geometry`` (N, 11),
     output ``refined`` (N, 9); N dynamic) to ONNX."""
-    path = Path(path)
     p = net.cfg.patch
-    tmp = path.with_name(f".{path.name}.tmp")
-    was_training = net.training
-    net.eval()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        torch.onnx.export(
-            net,
-            (torch.zeros(2, 3, p, p), torch.zeros(2, NUM_GEOM)),
-            str(tmp),
-            dynamo=False,
-            input_names=["patches", "geometry"],
-            output_names=["refined"],
-            dynamic_axes={"patches": {0: "n"}, "geometry": {0: "n"}, "refined": {0: "n"}},
-            opset_version=17,
-        )
-    os.replace(tmp, path)
-    net.train(was_training)
-    return path
+    inputs = (torch.zeros(2, 3, p, p), torch.zeros(2, NUM_GEOM))
+    return _export(
+        net, inputs, path, input_names=["patches", "geometry"], output_names=["refined"],
+        dynamic_axes={"patches": {0: "n"}, "geometry": {0: "n"}, "refined": {0: "n"}},
+    )  # fmt: skip

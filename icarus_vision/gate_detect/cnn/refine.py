@@ -30,6 +30,7 @@ import torch
 from torch import nn
 
 from icarus_vision.gate_detect.cnn.model import conv_bn_relu
+from icarus_vision.gate_detect.metrics import mean_sides
 
 
 @dataclass(frozen=True)
@@ -164,9 +165,9 @@ def usable(quads: np.ndarray, min_side_px: float = 4.0) -> np.ndarray:
     q = np.asarray(quads, float)
     e = np.roll(q, -1, axis=1) - q  # (N, 4, 2) edges
     cross = e[..., 0] * np.roll(e, -1, axis=1)[..., 1] - e[..., 1] * np.roll(e, -1, axis=1)[..., 0]
-    side = np.linalg.norm(e, axis=-1).mean(axis=1)
     with np.errstate(invalid="ignore"):
-        return np.isfinite(q).all(axis=(1, 2)) & (cross > 0).all(axis=1) & (side >= min_side_px)
+        big = mean_sides(q) >= min_side_px
+        return np.isfinite(q).all(axis=(1, 2)) & (cross > 0).all(axis=1) & big
 
 
 def offsets_to_corners(h: np.ndarray, offsets: np.ndarray, cfg: RefineConfig) -> np.ndarray:
@@ -202,8 +203,7 @@ def snap_to_peaks(
     scores = np.zeros(corners.shape[:2])
     if cfg.snap <= 0 or not len(corners):
         return out, scores
-    side = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=-1).mean(axis=1)
-    radius = np.maximum(cfg.snap * side, cfg.snap_min_px)
+    radius = np.maximum(cfg.snap * mean_sides(corners), cfg.snap_min_px)
     for k, (pos, val) in enumerate(peaks):
         if not len(pos):
             continue

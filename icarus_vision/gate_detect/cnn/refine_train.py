@@ -37,7 +37,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     to_tensor,
     usable,
 )
-from icarus_vision.gate_detect.metrics import evaluate_image, summarize
+from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
 
 CANDIDATES = DecodeConfig(
     centre_threshold=0.2, corner_threshold=0.2, snap_radius=0.4, min_snapped=0, sure_centre=1.0,
@@ -105,10 +105,6 @@ def first_stage(model: torch.nn.Module, images: np.ndarray, cfg: DecodeConfig, b
     return out
 
 
-def _side(q: np.ndarray) -> np.ndarray:
-    return np.linalg.norm(np.roll(q, -1, axis=-2) - q, axis=-1).mean(axis=-1)
-
-
 def label(quads: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """(N, 4, 2) targets of (N, 4, 2) candidates among (G, 4, 2) labelled gates (MATCH rule);
     NaN for a candidate that is no gate."""
@@ -116,7 +112,10 @@ def label(quads: np.ndarray, truth: np.ndarray) -> np.ndarray:
     truth = truth[np.isfinite(truth).all(axis=(1, 2))]
     if not len(truth) or not len(quads):
         return targets
-    d = np.linalg.norm(quads[:, None] - truth[None], axis=-1).mean(axis=-1) / _side(truth)[None]
+    d = (
+        np.linalg.norm(quads[:, None] - truth[None], axis=-1).mean(axis=-1)
+        / mean_sides(truth)[None]
+    )
     j = d.argmin(axis=1)
     ok = d[np.arange(len(quads)), j] <= MATCH
     targets[ok] = truth[j[ok]]
@@ -145,11 +144,11 @@ def jittered_truth(split: Split, rng: np.random.Generator, min_side_px: float = 
     idx, t = [], []
     for i, gates in enumerate(split.gates):
         for g in gates:
-            if np.isfinite(g.corners).all() and _side(g.corners) >= min_side_px:
+            if np.isfinite(g.corners).all() and mean_sides(g.corners) >= min_side_px:
                 idx.append(i)
                 t.append(g.corners)
     idx, t = np.array(idx, int), np.array(t, float).reshape(-1, 4, 2)
-    sigma = rng.uniform(*JITTER, size=len(t)) * _side(t)
+    sigma = rng.uniform(*JITTER, size=len(t)) * mean_sides(t)
     q = t + rng.normal(size=t.shape) * sigma[:, None, None]
     ok = usable(q)
     return idx[ok], q[ok], t[ok]
@@ -167,11 +166,11 @@ def make_batch(
     """Patches, geometry inputs, labels (N,), offset targets (N, 8) (NaN rows: no gate) and loss
     weights (N,) of some examples; with ``rng``, augmented (module docstring)."""
     quads, targets = quads.copy(), targets.copy()
-    weight = np.where(_side(quads) >= SMALL_PX, 1.0, SMALL_WEIGHT).astype(np.float32)
+    side = mean_sides(quads)
+    weight = np.where(side >= SMALL_PX, 1.0, SMALL_WEIGHT).astype(np.float32)
     w = images.shape[2]
     flip = np.zeros(len(quads), bool)
     if rng is not None:
-        side = _side(quads)
         moved = quads + rng.normal(size=quads.shape) * (0.015 * side)[:, None, None]
         ok = usable(moved)
         quads[ok] = moved[ok]
