@@ -53,7 +53,7 @@ def train_detector_cmd(
 
     model = ModelConfig()
     if widths is not None:
-        model = replace(model, widths=_widths(widths))
+        model = replace(model, widths=parse_widths(widths))
     if head_width is not None:
         model = replace(model, head_width=head_width)
     result = train_detector(
@@ -74,14 +74,13 @@ def print_best(epoch: int, m: dict, out: Path, files: str) -> None:
     console.print(f"checkpoints written to {escape(str(out))}/ ({files})")
 
 
-def _widths(text: str) -> tuple[int, int, int, int]:
-    """``--widths``: four positive channel counts, comma-separated."""
+def parse_widths(text: str, n: int = 4) -> tuple[int, ...]:
+    """``--widths``: ``n`` positive channel counts, comma-separated."""
     try:
         w = tuple(int(v) for v in text.split(","))
     except ValueError:
         w = ()
-    if len(w) != 4 or min(w) < 1:
-        raise ValueError(
-            f"--widths: expected four positive integers like 16,32,64,128, got {text!r}"
-        )
-    return w  # type: ignore[return-value]
+    if len(w) != n or min(w) < 1:
+        example = ",".join(str(16 * 2**i) for i in range(n))
+        raise ValueError(f"--widths: expected {n} positive integers like {example}, got {text!r}")
+    return w

@@ -31,6 +31,10 @@ def train_refiner_cmd(
     patch: int = typer.Option(
         48, min=16, help="Side of a new refiner's patch, px (a multiple of 8)."
     ),
+    widths: str = typer.Option(
+        "16,32,64", help="Channels of a new refiner's three stages, comma-separated."
+    ),
+    hidden: int = typer.Option(64, min=1, help="Units of a new refiner's hidden layer."),
 ) -> None:
     """Train the refiner: it rectifies each of the first stage's candidate gates into a small
     patch, decides whether it is a gate and corrects its corners.
@@ -40,13 +44,14 @@ def train_refiner_cmd(
     TensorBoard logs in OUT/tb. Ctrl-C saves OUT/last; --resume continues from it. Use the result
     with --detector cnn:OUT/best.
     """
+    from icarus_vision.commands.train_detector import parse_widths
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
     from icarus_vision.gate_detect.cnn.refine import RefineConfig
     from icarus_vision.gate_detect.cnn.refine_train import train_refiner
 
     result = train_refiner(
         SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
-        resume=resume, refine_config=RefineConfig(patch=patch),
+        resume=resume, refine_config=RefineConfig(patch=patch, widths=parse_widths(widths, 3), hidden=hidden),
         log=lambda s: console.print(s, highlight=False),
     )  # fmt: skip
     print_best(result.best_epoch, result.best_metrics, out, "best/, last/, refiner.onnx")

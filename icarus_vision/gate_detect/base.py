@@ -22,6 +22,9 @@ from icarus_vision.render.camera import Camera, project_points, world_to_camera
 from icarus_vision.render.labels import VISIBLE, facing_passage, gate_labels
 from icarus_vision.sim.track import Track
 
+FLIP_ORDER = [1, 0, 3, 2]
+"""Corner order of a mirrored gate: the new TL is the old TR, and so on."""
+
 
 @dataclass(frozen=True)
 class GateDetection:

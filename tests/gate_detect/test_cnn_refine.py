@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn import CnnDetector
 from icarus_vision.gate_detect.cnn import refine_train as rt
-from icarus_vision.gate_detect.cnn.augment import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.checkpoint import (
     export_refiner_onnx,
     load_checkpoint,
@@ -25,14 +25,18 @@ from icarus_vision.gate_detect.cnn.model import CornerNet
 from icarus_vision.gate_detect.cnn.refine import (
     RefineConfig,
     RefineNet,
+    Verdicts,
     corners_to_offsets,
     extract,
     homographies,
     offsets_to_corners,
     refine,
+    select,
     snap_to_peaks,
     square,
+    squareness,
     usable,
+    verdicts,
 )
 from icarus_vision.gate_detect.metrics import mean_sides
 
@@ -75,6 +79,53 @@ def test_corner_order_swapped_gives_the_mirrored_patch():
     a = extract(img, homographies(QUAD[None], CFG), CFG)[0].astype(int)
     b = extract(img, homographies(QUAD[None][:, FLIP_ORDER], CFG), CFG)[0].astype(int)
     assert np.abs(a[:, ::-1] - b).max() <= 1
+
+
+def test_squareness_tells_a_square_from_a_rectangle_in_any_view():
+    from icarus_vision.render.camera import intrinsics
+
+    k = intrinsics(320, 240, 95.0)
+    rng = np.random.default_rng(0)
+
+    def seen(width: float, height: float) -> np.ndarray:
+        """Corners of a width x height frame 4 m ahead, turned at random, in the image."""
+        local = np.array([[-1, 1, 0], [1, 1, 0], [1, -1, 0], [-1, -1, 0]]) * [
+            width / 2,
+            height / 2,
+            0,
+        ]
+        out = []
+        for _ in range(20):
+            yaw, pitch, roll = rng.uniform(-0.9, 0.9), rng.uniform(-0.5, 0.5), rng.uniform(-1, 1)
+            rz = np.array(
+                [[np.cos(roll), -np.sin(roll), 0], [np.sin(roll), np.cos(roll), 0], [0, 0, 1]]
+            )
+            ry = np.array(
+                [[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]]
+            )
+            rx = np.array(
+                [[1, 0, 0], [0, np.cos(pitch), -np.sin(pitch)], [0, np.sin(pitch), np.cos(pitch)]]
+            )
+            pts = local * [1, -1, 1] @ (rz @ ry @ rx).T + [0.3, -0.2, 4.0]
+            uv = pts @ k.T
+            out.append(uv[:, :2] / uv[:, 2:])
+        return np.array(out)
+
+    sq = squareness(seen(1.0, 1.0), (320, 240), 95.0)
+    np.testing.assert_allclose(sq, 0.0, atol=1e-4)  # a square, under the nominal camera
+    tall = squareness(seen(1.0, 1.6), (320, 240), 95.0)
+    np.testing.assert_allclose(np.abs(tall[:, 0]), np.log(1.6), atol=1e-4)
+    np.testing.assert_allclose(tall[:, 1], 0.0, atol=1e-4)
+    # under another camera a square is still close to one
+    wide = squareness(seen(1.0, 1.0), (320, 240), 105.0)
+    assert np.abs(wide).max() < 0.25
+
+
+def test_refiners_saved_before_the_squareness_inputs_still_load():
+    old = {k: v for k, v in RefineConfig().to_dict().items() if k != "square_hfov_deg"}
+    cfg = RefineConfig.from_dict(old)
+    assert cfg.square_hfov_deg == 0.0 and cfg.num_geom == 11
+    assert RefineConfig().num_geom == 13
 
 
 def test_usable_refuses_degenerate_candidates():
@@ -146,6 +197,50 @@ def test_refine_reports_corrected_gates_best_first_without_duplicates():
     assert refine(_refiner(), img, [], peaks, CFG) == []
 
 
+def test_mirrored_reading_is_mirror_symmetric():
+    # Reading an image and its mirror image with the mirrored reading averaged in gives mirrored
+    # answers: the two readings of one are the two readings of the other, swapped.
+    img = _gate_image()
+    w = img.shape[1]
+    cand = QUAD + np.array([[2.0, 1.0], [-1.0, 3.0], [0.0, -2.0], [1.5, 0.5]])
+    mirrored = cand[FLIP_ORDER] * [-1.0, 1.0] + [w - 1.0, 0.0]
+    net, cfg = _refiner(5), RefineConfig(patch=40, margin=8, mirror=True)
+    a = verdicts(net, img, [(cand, np.ones(4), 0.9)], cfg)
+    b = verdicts(net, np.ascontiguousarray(img[:, ::-1]), [(mirrored, np.ones(4), 0.9)], cfg)
+    np.testing.assert_allclose(b.prob, a.prob, atol=1e-4)
+    back = b.corners[0][FLIP_ORDER] * [-1.0, 1.0] + [w - 1.0, 0.0]
+    np.testing.assert_allclose(back, a.corners[0], atol=0.05)
+    # without it, the answers differ (the untrained network is not symmetric)
+    plain = RefineConfig(patch=40, margin=8)
+    c = verdicts(net, img, [(cand, np.ones(4), 0.9)], plain)
+    d = verdicts(net, np.ascontiguousarray(img[:, ::-1]), [(mirrored, np.ones(4), 0.9)], plain)
+    d_back = d.corners[0][FLIP_ORDER] * [-1.0, 1.0] + [w - 1.0, 0.0]
+    assert np.abs(d_back - c.corners[0]).max() > 0.05
+    # the plain reading of the mirror image is the mirrored reading: the result is their mean
+    np.testing.assert_allclose(a.corners[0], 0.5 * (c.corners[0] + d_back), atol=0.05)
+    logit = 0.5 * (np.log(c.prob / (1 - c.prob)) + np.log(d.prob / (1 - d.prob)))
+    np.testing.assert_allclose(a.prob, 1 / (1 + np.exp(-logit)), atol=1e-4)
+
+
+def test_select_keeps_scores_over_the_threshold_best_first_without_overlaps():
+    q = np.stack([QUAD, QUAD + 1.0, QUAD + 150.0, QUAD - 90.0])
+    v = Verdicts(prob=np.array([0.9, 0.95, 0.8, 0.2]), stage=np.array([0.5, 0.9, 1.0, 1.0]),
+                 corners=q)  # fmt: skip
+    peaks = [(np.zeros((0, 2)), np.zeros(0))] * 4
+    found = select(v, peaks, RefineConfig(threshold=0.3))
+    # scores 0.45, 0.855, 0.8, 0.2: the last is under the threshold, the first overlaps the second
+    assert [round(f[2], 3) for f in found] == [0.855, 0.8]
+    np.testing.assert_array_equal(found[0][0], QUAD + 1.0)
+    assert select(Verdicts.empty(), peaks, RefineConfig()) == []
+
+
+def test_verdicts_skip_candidates_under_the_floor():
+    img, net = _gate_image(), _refiner()
+    cands = [(QUAD, np.ones(4), 0.9), (QUAD + 100.0, np.ones(4), 0.1)]
+    assert len(verdicts(net, img, cands, CFG).prob) == 1  # floor: CFG.threshold
+    assert len(verdicts(net, img, cands, CFG, floor=0.05).prob) == 2
+
+
 def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     onnx = pytest.importorskip("onnx")
     from onnx.reference import ReferenceEvaluator
@@ -157,7 +252,7 @@ def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     _, _, meta = load_checkpoint(tmp_path / "ck")
     loaded = load_refiner(tmp_path / "ck", meta)
     assert loaded.cfg == CFG and meta["refine_training"]["note"] == "r"
-    x, g = torch.rand(3, 3, 40, 40), torch.rand(3, 11)
+    x, g = torch.rand(3, 3, 40, 40), torch.rand(3, CFG.num_geom)
     with torch.no_grad():
         a = net(x, g)
         assert torch.equal(a, loaded(x, g))

@@ -68,6 +68,10 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
             ["train-refiner", "--data", "{data}", "--out", "{tmp}/o", "--detector", "{tmp}/none"],
             "none",
         ),
+        (
+            ["train-refiner", "--data", "{data}", "--out", "{tmp}/o", "--widths", "8,16"],
+            "expected 3 positive integers",
+        ),
     ],
 )
 def test_errors_are_one_line(tiny_dataset, tmp_path, args, needle):
@@ -96,3 +100,21 @@ def test_train_detector_help_states_the_model_defaults():
     default = ModelConfig()
     assert f"[default: {','.join(map(str, default.widths))}]" in params["widths"].help
     assert f"[default: {default.head_width}]" in params["head_width"].help
+
+
+def test_train_refiner_builds_the_refiner_asked_for_and_tunes_it(tiny_dataset, tmp_path):
+    from icarus_vision.gate_detect.cnn.refine import RefineConfig
+
+    out = tmp_path / "run"
+    r = runner.invoke(app, ["train-refiner", "--data", str(tiny_dataset), "--out", str(out),
+                            "--epochs", "1", "--patch", "24", "--widths", "4,8,8",
+                            "--hidden", "8"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    refine = json.loads((out / "best" / "detector.json").read_text())["refine"]
+    assert refine["widths"] == [4, 8, 8] and refine["hidden"] == 8 and refine["patch"] == 24
+    # tuned on val: a threshold and a mirror setting from the grids
+    assert isinstance(refine["mirror"], bool) and 0.1 <= refine["threshold"] <= 0.4
+    params = {p.name: p for p in typer.main.get_command(app).commands["train-refiner"].params}
+    default = RefineConfig()
+    assert params["widths"].default == ",".join(map(str, default.widths))
+    assert params["hidden"].default == default.hidden

@@ -25,7 +25,7 @@ from icarus_vision.gate_detect.base import Detector, GateDetection, validate_ima
 from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint, load_refiner
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import CornerNet
-from icarus_vision.gate_detect.cnn.refine import NUM_GEOM, RefineNet, refine
+from icarus_vision.gate_detect.cnn.refine import RefineNet, refine
 from icarus_vision.gate_detect.registry import register_detector
 
 
@@ -124,7 +124,7 @@ class CnnDetector(Detector):
             if frozen:
                 p = refiner.cfg.patch
                 patches = torch.zeros(2, p, p, 3).permute(0, 3, 1, 2)
-                self.refiner = frozen_trace(self.refiner, (patches, torch.zeros(2, NUM_GEOM)))
+                self.refiner = frozen_trace(self.refiner, (patches, torch.zeros(2, refiner.cfg.num_geom)))
 
     @property
     def model(self) -> nn.Module:

@@ -4,7 +4,8 @@ Photometric: blur, motion blur, Gaussian noise, colour/brightness/contrast/hue j
 shuffle (gate colours never rendered), grey, JPEG artefacts. Geometric: a small affine (scale,
 rotation, shift, shear) with constant (black) borders, since reflected borders would duplicate
 gates and their corners. The horizontal mirror, which must also swap TL <-> TR and BR <-> BL, is
-applied by :class:`~icarus_vision.gate_detect.cnn.data.GateDataset` itself.
+applied by :class:`~icarus_vision.gate_detect.cnn.data.GateDataset` itself
+(``base.FLIP_ORDER``).
 
 Keypoints are in continuous pixel coordinates (the image's left edge at x = 0), the convention
 albumentations uses.
@@ -14,9 +15,6 @@ from __future__ import annotations
 
 import albumentations as A  # noqa: N812
 import cv2
-
-FLIP_ORDER = [1, 0, 3, 2]
-"""Corner order of a mirrored gate: the new TL is the old TR, and so on."""
 
 
 def make_augment(seed: int | None = 0) -> A.Compose:

@@ -22,7 +22,7 @@ from safetensors.torch import load_file, save_file
 from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
-from icarus_vision.gate_detect.cnn.refine import NUM_GEOM, RefineConfig, RefineNet
+from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
 
 FORMAT = "icarus-vision-detector/1"
 WEIGHTS, CONFIG, ONNX = "model.safetensors", "detector.json", "model.onnx"
@@ -154,10 +154,10 @@ def export_onnx(model: CornerNet, path: str | Path) -> Path:
 
 
 def export_refiner_onnx(net: RefineNet, path: str | Path) -> Path:
-    """Export the refiner (inputs ``patches`` (N, 3, P, P) in [0, 1] and ``geometry`` (N, 11),
+    """Export the refiner (inputs ``patches`` (N, 3, P, P) in [0, 1] and ``geometry`` (N, G),
     output ``refined`` (N, 9); N dynamic) to ONNX."""
     p = net.cfg.patch
-    inputs = (torch.zeros(2, 3, p, p), torch.zeros(2, NUM_GEOM))
+    inputs = (torch.zeros(2, 3, p, p), torch.zeros(2, net.cfg.num_geom))
     return _export(
         net, inputs, path, input_names=["patches", "geometry"], output_names=["refined"],
         dynamic_axes={"patches": {0: "n"}, "geometry": {0: "n"}, "refined": {0: "n"}},

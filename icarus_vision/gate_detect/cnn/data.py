@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 from torch.utils.data import Dataset
 
-from icarus_vision.gate_detect.cnn.augment import FLIP_ORDER, make_augment
+from icarus_vision.gate_detect.base import FLIP_ORDER
+from icarus_vision.gate_detect.cnn.augment import make_augment
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,9 @@ The corrected corners go back to the camera image through the inverse homography
 is then snapped to the first stage's nearest peak of its corner type within ``snap`` of the gate's
 side (on val, the refiner's own corners were the better ones, so the shipped detector does not).
 
+Optionally (``RefineConfig.mirror``) each candidate is read a second time mirrored, and the two
+readings are averaged.
+
 Shapes: patches (B, 3, P, P) float in [0, 1]; network output (B, 9).
 """
 
@@ -29,6 +32,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.model import conv_bn_relu
 from icarus_vision.gate_detect.metrics import mean_sides
 
@@ -53,6 +57,13 @@ class RefineConfig:
     fraction of the gate's mean side (at least ``snap_min_px``); 0: no snapping."""
     snap_min_px: float = 1.5
     """Smallest snap radius, camera pixels."""
+    mirror: bool = False
+    """Also read each candidate mirrored and average the two readings (test-time augmentation:
+    twice the refiner's work)."""
+    square_hfov_deg: float = 95.0
+    """Horizontal field of view of the nominal camera under which the refiner is also told how
+    square each candidate is in 3-D (:func:`squareness`), degrees; 0: not told (refiners saved
+    before these inputs existed)."""
 
     @property
     def side(self) -> int:
@@ -62,27 +73,65 @@ class RefineConfig:
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
+    @property
+    def num_geom(self) -> int:
+        """Inputs besides the patch (:func:`geometry`)."""
+        return 13 if self.square_hfov_deg else 11
+
     @classmethod
     def from_dict(cls, d: dict) -> RefineConfig:
+        d = {"square_hfov_deg": 0.0, **d}  # files written before the squareness inputs had none
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
-NUM_GEOM = 11
-"""Inputs besides the patch (:func:`geometry`): where the candidate is in the image (rectifying
-hides its shape: any quadrilateral maps to the square) and the first stage's scores."""
+def squareness(quads: np.ndarray, image_size: tuple[int, int], hfov_deg: float) -> np.ndarray:
+    """(N, 2) how far each (4, 2) quadrilateral is from the image of a square: log of the ratio
+    of its two sides' lengths in 3-D, and the cosine of the angle between them (both 0 for a
+    square), under a pinhole camera of ``hfov_deg`` with a centred principal point.
+
+    The homography H from the unit square to the quadrilateral is K [r1 r2 t] up to scale, r1
+    and r2 the square's two edge directions scaled by its size; a square has |r1| = |r2| and
+    r1 . r2 = 0. Gate-like frames that are not square (the dataset's distractors) fail this in
+    most views, though rectifying the candidate hides its shape from the patch. A camera whose
+    field of view differs from ``hfov_deg`` shifts both values a little (a refiner learns that
+    spread, as the training data's fields of view vary).
+    """
+    w, h = image_size
+    f = 0.5 * w / np.tan(np.radians(hfov_deg) / 2.0)
+    k_inv = np.array([[1.0 / f, 0.0, -(w - 1) / (2.0 * f)],
+                      [0.0, 1.0 / f, -(h - 1) / (2.0 * f)], [0.0, 0.0, 1.0]])  # fmt: skip
+    unit = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]], np.float32)
+    hom = np.empty((len(quads), 3, 3))
+    for i, q in enumerate(np.asarray(quads, np.float32)):
+        hom[i] = cv2.getPerspectiveTransform(unit, q)
+    m = k_inv @ hom
+    r1, r2 = m[:, :, 0], m[:, :, 1]
+    n1, n2 = np.linalg.norm(r1, axis=1), np.linalg.norm(r2, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        aspect = np.clip(np.log(n1 / n2), -3.0, 3.0)
+        cos = np.clip((r1 * r2).sum(axis=1) / (n1 * n2), -1.0, 1.0)
+    return np.nan_to_num(np.stack([aspect, cos], axis=1))
 
 
-def geometry(quads: np.ndarray, scores: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
-    """(N, 11) float32 inputs of the refiner besides the patch.
+def geometry(
+    quads: np.ndarray, scores: np.ndarray, image_size: tuple[int, int], cfg: RefineConfig
+) -> np.ndarray:
+    """(N, ``cfg.num_geom``) float32 inputs of the refiner besides the patch: where the
+    candidate is in the image (rectifying hides its shape: any quadrilateral maps to the square),
+    the first stage's scores and, with ``cfg.square_hfov_deg``, its :func:`squareness`.
 
     Args:
         quads: (N, 4, 2) candidate corners, camera pixels.
         scores: (N, 3) first-stage centre score, mean corner score, fraction of snapped corners.
         image_size: (W, H) of the camera frame.
+        cfg: the refiner's configuration.
     """
     w, h = image_size
     q = (quads - (w / 2.0, h / 2.0)) / w
-    return np.concatenate([q.reshape(-1, 8), scores], axis=1).astype(np.float32)
+    parts = [q.reshape(-1, 8), scores]
+    if cfg.square_hfov_deg:
+        parts.append(squareness(quads, image_size, cfg.square_hfov_deg))
+    return np.concatenate(parts, axis=1).astype(np.float32)
 
 
 def stage_scores(gates: list[tuple[np.ndarray, np.ndarray, float]]) -> np.ndarray:
@@ -93,7 +142,8 @@ def stage_scores(gates: list[tuple[np.ndarray, np.ndarray, float]]) -> np.ndarra
 
 
 class RefineNet(nn.Module):
-    """Three stride-2 stages and a fully connected head: (B, 3, P, P), (B, 11) -> (B, 9).
+    """Three stride-2 stages and a fully connected head: (B, 3, P, P), (B, G) -> (B, 9), G =
+    :attr:`RefineConfig.num_geom`.
 
     Output: column 0 the gate logit; columns 1-8 (dx, dy) per corner TL, TR, BR, BL, patch
     pixels divided by :attr:`RefineConfig.side`.
@@ -113,7 +163,7 @@ class RefineNet(nn.Module):
             conv_bn_relu(c3, c3),
         )
         cells = (cfg.patch // 8) ** 2
-        self.hidden = nn.Sequential(nn.Linear(c3 * cells + NUM_GEOM, cfg.hidden), nn.ReLU())
+        self.hidden = nn.Sequential(nn.Linear(c3 * cells + cfg.num_geom, cfg.hidden), nn.ReLU())
         self.out = nn.Linear(cfg.hidden, 9)
 
     def forward(self, x: torch.Tensor, geom: torch.Tensor) -> torch.Tensor:
@@ -215,6 +265,106 @@ def snap_to_peaks(
     return out, scores
 
 
+@dataclass
+class Verdicts:
+    """The refiner's output for one image's candidates (what :func:`select` chooses from).
+
+    Attributes:
+        prob: (N,) gate probability of each candidate it looked at.
+        stage: (N,) the first stage's score of each.
+        corners: (N, 4, 2) corrected corners, camera pixels.
+    """
+
+    prob: np.ndarray
+    stage: np.ndarray
+    corners: np.ndarray
+
+    @classmethod
+    def empty(cls) -> Verdicts:
+        return cls(np.zeros(0), np.zeros(0), np.zeros((0, 4, 2)))
+
+
+def verdicts(
+    net: nn.Module,
+    image: np.ndarray,
+    gates: list[tuple[np.ndarray, np.ndarray, float]],
+    cfg: RefineConfig,
+    floor: float | None = None,
+    dtype: torch.dtype = torch.float32,
+) -> Verdicts:
+    """Run the refiner on one image's candidates.
+
+    Args:
+        net: a trained :class:`RefineNet` (or its traced form), eval mode.
+        image: (H, W, 3) uint8 RGB camera frame.
+        gates: first-stage candidates ``(corners (4, 2) px, corner_scores (4,), score)``.
+        cfg: patch geometry; with ``cfg.mirror``, each candidate is also read mirrored and the
+            two readings are averaged (logits, and corners in the image).
+        floor: candidates the first stage scored under this are not looked at (default
+            ``cfg.threshold``: the refiner's probability is at most 1, so they cannot pass).
+        dtype: the network's input dtype.
+    """
+    floor = cfg.threshold if floor is None else floor
+    gates = [g for g in gates if g[2] >= floor]
+    if not gates:
+        return Verdicts.empty()
+    quads = np.array([g[0] for g in gates], np.float64)
+    ok = usable(quads)
+    if not ok.any():
+        return Verdicts.empty()
+    quads, scores = quads[ok], stage_scores(gates)[ok]
+    n, size = len(quads), image.shape[1::-1]
+    seen = quads
+    if cfg.mirror:  # the mirrored reading: corner order swapped, so the patch comes out mirrored
+        flipped = quads[:, FLIP_ORDER]
+        seen = np.concatenate([quads, flipped])
+        mirrored = flipped.copy()
+        mirrored[..., 0] = size[0] - 1 - mirrored[..., 0]
+        both = np.concatenate([quads, mirrored])
+        geom = geometry(both, np.concatenate([scores, scores]), size, cfg)
+    else:
+        geom = geometry(quads, scores, size, cfg)
+    h = homographies(seen, cfg)
+    with torch.inference_mode():
+        x = to_tensor(extract(image, h, cfg)).to(dtype)
+        out = net(x, torch.from_numpy(geom).to(dtype)).float().numpy()
+    corners = offsets_to_corners(h, out[:, 1:], cfg)
+    logit = out[:n, 0]
+    if cfg.mirror:
+        logit = 0.5 * (logit + out[n:, 0])
+        corners = 0.5 * (corners[:n] + corners[n:][:, FLIP_ORDER])
+    stage = np.array([g[2] for g in gates])[ok]
+    return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, corners)
+
+
+def select(
+    v: Verdicts,
+    peaks: list[tuple[np.ndarray, np.ndarray]],
+    cfg: RefineConfig,
+    nms_iou: float = 0.5,
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The gates among one image's :class:`Verdicts`: score at least ``cfg.threshold``, corners
+    (snapped when ``cfg.snap``) finite, not overlapping a better gate by more than ``nms_iou``.
+
+    Returns:
+        per gate ``(corners (4, 2) px, corner_scores (4,), score)``, best first.
+    """
+    from icarus_vision.gate_detect.cnn.decode import quad_iou
+
+    score = v.prob * v.stage
+    keep = np.flatnonzero(score >= cfg.threshold)
+    if not len(keep):
+        return []
+    keep = keep[np.argsort(-score[keep], kind="stable")]
+    corners, snapped = snap_to_peaks(v.corners[keep], peaks, cfg)
+    found: list[tuple[np.ndarray, np.ndarray, float]] = []
+    for c, s, p, sc in zip(corners, snapped, v.prob[keep], score[keep], strict=True):
+        if not np.isfinite(c).all() or any(quad_iou(c, f[0]) > nms_iou for f in found):
+            continue
+        found.append((c, np.where(s > 0, s, p), float(sc)))
+    return found
+
+
 def refine(
     net: nn.Module,
     image: np.ndarray,
@@ -224,7 +374,7 @@ def refine(
     nms_iou: float = 0.5,
     dtype: torch.dtype = torch.float32,
 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """Verify and correct one image's candidate gates.
+    """Verify and correct one image's candidate gates (:func:`verdicts`, then :func:`select`).
 
     Args:
         net: a trained :class:`RefineNet` (or its traced form), eval mode.
@@ -240,33 +390,4 @@ def refine(
         refiner's gate probability times the first stage's score: on the val split this product
         separated gates from the rest better than either alone (README).
     """
-    from icarus_vision.gate_detect.cnn.decode import quad_iou
-
-    # the refiner's probability is at most 1: a candidate scored below the threshold by the first
-    # stage cannot pass, and is not looked at
-    gates = [g for g in gates if g[2] >= cfg.threshold]
-    if not gates:
-        return []
-    quads = np.array([g[0] for g in gates], np.float64)
-    ok = usable(quads)
-    quads, geom = quads[ok], geometry(quads[ok], stage_scores(gates)[ok], image.shape[1::-1])
-    if not len(quads):
-        return []
-    h = homographies(quads, cfg)
-    with torch.inference_mode():
-        x = to_tensor(extract(image, h, cfg)).to(dtype)
-        out = net(x, torch.from_numpy(geom).to(dtype)).float().numpy()
-    prob = 1.0 / (1.0 + np.exp(-out[:, 0]))
-    score = prob * np.array([g[2] for g in gates])[ok]
-    keep = np.flatnonzero(score >= cfg.threshold)
-    if not len(keep):
-        return []
-    keep = keep[np.argsort(-score[keep], kind="stable")]
-    corners = offsets_to_corners(h[keep], out[keep, 1:], cfg)
-    corners, snapped = snap_to_peaks(corners, peaks, cfg)
-    found: list[tuple[np.ndarray, np.ndarray, float]] = []
-    for c, s, p, sc in zip(corners, snapped, prob[keep], score[keep], strict=True):
-        if not np.isfinite(c).all() or any(quad_iou(c, f[0]) > nms_iou for f in found):
-            continue
-        found.append((c, np.where(s > 0, s, p), float(sc)))
-    return found
+    return select(verdicts(net, image, gates, cfg, dtype=dtype), peaks, cfg, nms_iou)

@@ -22,20 +22,22 @@ import numpy as np
 import torch
 
 from icarus_vision.fileio import atomic_write_json
-from icarus_vision.gate_detect.cnn.augment import FLIP_ORDER
+from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.data import Split
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.refine import (
     RefineConfig,
     RefineNet,
+    Verdicts,
     corners_to_offsets,
     extract,
     geometry,
     homographies,
-    refine,
+    select,
     stage_scores,
     to_tensor,
     usable,
+    verdicts,
 )
 from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
 
@@ -196,7 +198,7 @@ def make_batch(
         off[gate] = corners_to_offsets(h[gate], targets[gate], cfg)
     seen = quads.copy()  # a mirrored candidate is where its mirror image would be
     seen[flip, :, 0] = w - 1 - seen[flip, :, 0]
-    geom = torch.from_numpy(geometry(seen, scores, (w, images.shape[1])))
+    geom = torch.from_numpy(geometry(seen, scores, (w, images.shape[1]), cfg))
     label = torch.from_numpy(gate.astype(np.float32))
     return x, geom, label, torch.from_numpy(off).float(), torch.from_numpy(weight)
 
@@ -232,12 +234,20 @@ def evaluate(
     cfg: RefineConfig,
     min_gate_px: float = 20.0,
     nms_iou: float = 0.5,
+    read: list[Verdicts] | None = None,
 ) -> dict:
-    """eval-detector figures of first stage + refiner on ``split`` (first-stage output given)."""
+    """eval-detector figures of first stage + refiner on ``split`` (first-stage output given;
+    ``read``: the refiner's verdicts on it too, read at a floor no higher than
+    ``cfg.threshold``)."""
     net.eval()
+    if read is None:
+        read = [
+            verdicts(net, im, gates, cfg)
+            for im, (gates, _) in zip(split.images, per_image, strict=True)
+        ]
     gts, preds = [], []
-    for im, (gates, peaks), truth in zip(split.images, per_image, split.gates, strict=True):
-        found = refine(net, im, gates, peaks, cfg, nms_iou)
+    for v, (_, peaks), truth in zip(read, per_image, split.gates, strict=True):
+        found = select(v, peaks, cfg, nms_iou)
         t = [(g.corners, g.visibility, g.distance) for g in truth]
         g_rec, p_rec = evaluate_image([(c, s) for c, _, s in found], t, min_gate_px)
         gts += g_rec
@@ -247,20 +257,33 @@ def evaluate(
 
 THRESHOLDS = (0.15, 0.2, 0.25, 0.3, 0.35, 0.4)
 SNAPS = (0.0, 0.05)
+MIRRORS = (False, True)
 
 
 def tune(
-    net, split: Split, per_image: list, cfg: RefineConfig, min_gate_px: float = 20.0
+    net,
+    split: Split,
+    per_image: list,
+    cfg: RefineConfig,
+    min_gate_px: float = 20.0,
+    mirrors: tuple[bool, ...] = MIRRORS,
 ) -> tuple[RefineConfig, dict]:
-    """The gate threshold and snap radius (grids above) with the best validation score
-    (:func:`~icarus_vision.gate_detect.cnn.tune.score`); ties go to the higher threshold."""
+    """The gate threshold, snap radius and mirrored reading (grids above) with the best
+    validation score (:func:`~icarus_vision.gate_detect.cnn.tune.score`); near-ties go to the
+    fewest detections, then to the first tried (no mirroring, the higher threshold). The refiner
+    reads the split once per mirror setting."""
     from icarus_vision.gate_detect.cnn.tune import choose
 
+    net.eval()
     tried = []
-    for t in THRESHOLDS[::-1]:
-        for s in SNAPS:
-            c = replace(cfg, threshold=t, snap=s)
-            tried.append((c, evaluate(net, split, per_image, c, min_gate_px)))
+    for m in mirrors:
+        c = replace(cfg, mirror=m)
+        read = [verdicts(net, im, g, c, floor=min(THRESHOLDS))
+                for im, (g, _) in zip(split.images, per_image, strict=True)]  # fmt: skip
+        for t in THRESHOLDS[::-1]:
+            for s in SNAPS:
+                c = replace(cfg, threshold=t, snap=s, mirror=m)
+                tried.append((c, evaluate(net, split, per_image, c, min_gate_px, read=read)))
     return choose(tried)
 
 
