@@ -124,7 +124,9 @@ class CnnDetector(Detector):
             if frozen:
                 p = refiner.cfg.patch
                 patches = torch.zeros(2, p, p, 3).permute(0, 3, 1, 2)
-                self.refiner = frozen_trace(self.refiner, (patches, torch.zeros(2, refiner.cfg.num_geom)))
+                self.refiner = frozen_trace(
+                    self.refiner, (patches, torch.zeros(2, refiner.cfg.num_geom))
+                )
 
     @property
     def model(self) -> nn.Module:
