@@ -5,12 +5,13 @@ Usage::
     icarus-vision gen-dataset --recipe datasets/gates-v1.toml --out datasets/gates-v2-test \\
         --num-images 10000 --seed 1        # held out: the shipped CNN was trained on seed 0
     python benchmarks/detector.py [--data datasets/gates-v2-test] [--detectors cnn opencv]
-                                  [--limit N] [--json PATH]
+                                  [--limit N] [--json PATH] [--backend-rounds N]
 
 For each detector: the test-split figures of ``eval_detector`` (precision, recall, corner error,
-PCK, by distance) and a latency run: ``detect`` on the first 50 test frames, 5 passes, PyTorch and
-OpenCV on one thread, reporting the median and 95th percentile ms per frame. Prints a table and
-one JSON object (also written to ``--json``). The machine's 1-minute load average is recorded:
+PCK, by distance) and a latency run: ``detect`` on the first 50 test frames, 5 passes, on one
+thread, reporting the median and 95th percentile ms per frame; for a CNN, also
+``--backend-rounds`` alternating runs on each backend, PyTorch and ONNX Runtime (the median of
+their medians). Prints a table and one JSON object (also written to ``--json``). The machine's 1-minute load average is recorded:
 timings on a busy machine are slower than on an idle core.
 """
 
@@ -32,9 +33,19 @@ from icarus_vision.gate_detect.evaluate import eval_detector, one_thread
 DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v2-test"
 
 
-def latency(spec: str, data: Path, frames: int = 50, passes: int = 5) -> dict:
+def make(spec: str, backend: str | None = None):
+    """The detector of ``spec``; a CNN on ``backend`` if given (else its default, "auto")."""
+    if backend is None:
+        return make_detector(spec)
+    from icarus_vision.gate_detect.cnn import CnnDetector
+
+    path = spec.partition(":")[2] or None
+    return CnnDetector.load(path, backend=backend)
+
+
+def latency(spec: str, data: Path, frames: int = 50, passes: int = 5, backend=None) -> dict:
     """Median and p95 ms per ``detect`` call on one thread."""
-    det = make_detector(spec)
+    det = make(spec, backend)
     split = load_split(data, "test", None, frames)
     images = [read_rgb(f) for f in split.files]
     times = []
@@ -56,6 +67,12 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--detectors", nargs="+", default=["cnn", "opencv"])
     ap.add_argument("--limit", type=int, default=None, help="Evaluate the first N test images.")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument(
+        "--backend-rounds",
+        type=int,
+        default=3,
+        help="Alternating latency runs of each CNN backend (torch, onnxruntime).",
+    )
     args = ap.parse_args(argv)
     if not (args.data / "annotations" / "test.json").is_file():
         sys.exit(f"{args.data}: no dataset; generate it first (see this script's docstring)")
@@ -65,6 +82,15 @@ def main(argv: list[str] | None = None) -> dict:
         keep = ("images", "gates", "min_gate_px", "precision", "recall", "corner_error_px", "pck",
                 "ms_per_frame", "by_distance", "by_size")  # fmt: skip
         out["detectors"][spec] = {k: r[k] for k in keep} | {"latency": latency(spec, args.data)}
+        if spec.split(":")[0] == "cnn":  # both backends, alternating (the machine's load drifts)
+            runs = {b: [] for b in ("torch", "onnxruntime")}
+            for _ in range(args.backend_rounds):
+                for b in runs:
+                    runs[b].append(latency(spec, args.data, backend=b)["median_ms"])
+            out["detectors"][spec]["latency_by_backend_ms"] = {
+                b: {"median_of_medians": round(float(np.median(v)), 3), "runs": v}
+                for b, v in runs.items()
+            }
     print(f"{'detector':10} {'gates':>6} {'prec':>6} {'recall':>6} {'med px':>7} {'mean px':>7} "
           f"{'PCK2':>6} {'PCK5':>6} {'ms p50':>7} {'ms p95':>7}")  # fmt: skip
     for spec, r in out["detectors"].items():
@@ -73,6 +99,8 @@ def main(argv: list[str] | None = None) -> dict:
         cells = " ".join(f"{'-' if x is None else f'{x:.3f}':>6}" for x in f)
         lat = r["latency"]
         print(f"{spec:10} {r['gates']:>6} {cells} {lat['median_ms']:>7.2f} {lat['p95_ms']:>7.2f}")
+        for b, v in r.get("latency_by_backend_ms", {}).items():
+            print(f"  {b}: {v['median_of_medians']:.2f} ms per frame (median of {v['runs']})")
     print(json.dumps(out))
     if args.json is not None:
         args.json.write_text(json.dumps(out, indent=2))

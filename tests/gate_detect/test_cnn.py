@@ -325,8 +325,12 @@ def test_shipped_cnn_finds_a_rendered_gate(pos):
     with Scene(track, cam) as scene:
         frame = scene.render(np.array(pos), quat)
     truth, _ = cam.project(track.gates[0].corners(), np.array(pos), quat)
-    det = make_detector("cnn")
-    for det.bf16 in (False, True):  # float32, and bfloat16 (native or emulated)
-        found = det.detect(frame.rgb)
+    # float32 on both backends, and bfloat16 (native or emulated)
+    for settings in (
+        {"backend": "torch", "bf16": False},
+        {"backend": "onnxruntime"},
+        {"bf16": True},
+    ):
+        found = CnnDetector.load(**settings).detect(frame.rgb)
         assert len(found) == 1
         assert np.linalg.norm(found[0].corners - truth, axis=1).max() < 3.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -260,14 +261,23 @@ def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     sess = ReferenceEvaluator(onnx.load(str(tmp_path / "r.onnx")))
     y = sess.run(None, {"patches": x.numpy(), "geometry": g.numpy()})[0]
     np.testing.assert_allclose(y, a.numpy(), atol=1e-4)
-    # frozen (batch norm folded, traced) and eager detectors agree
     img = _gate_image()
-    dets = [CnnDetector(corner, DecodeConfig(centre_threshold=0.0), refiner=loaded, frozen=f)
-            for f in (True, False)]  # fmt: skip
-    a, b = (d.detect(img) for d in dets)
-    assert len(a) == len(b)
-    for p, q in zip(a, b, strict=True):
-        np.testing.assert_allclose(p.corners, q.corners, atol=1e-3)
+    # frozen (batch norm folded, traced), eager and ONNX Runtime detectors agree
+    settings = [{"frozen": True, "backend": "torch"}, {"frozen": False, "backend": "torch"},
+                {"backend": "onnxruntime"}]  # fmt: skip
+    every = RefineNet(replace(CFG, threshold=0.0))  # passes the untrained networks' candidates
+    every.load_state_dict(loaded.state_dict())
+    with torch.no_grad():  # centre peaks regressing a square of 4 cells' half-side
+        corner.out.bias[0] = 0.0
+        corner.out.bias[7:15] = torch.tensor([-0.5, -0.5, 0.5, -0.5, 0.5, 0.5, -0.5, 0.5])
+    dets = [CnnDetector(corner, DecodeConfig(centre_threshold=0.0), refiner=every, **kw)
+            for kw in settings]  # fmt: skip
+    a, *others = (d.detect(img) for d in dets)
+    assert len(a) > 0
+    for b in others:
+        assert len(a) == len(b)
+        for p, q in zip(a, b, strict=True):
+            np.testing.assert_allclose(p.corners, q.corners, atol=1e-3)
 
 
 def test_missing_or_corrupt_refiner_names_the_file(tmp_path):

@@ -9,6 +9,7 @@ atomically. ``load_checkpoint`` accepts the folder or any of its files.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import warnings
@@ -19,7 +20,7 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
-from icarus_vision.fileio import atomic_write_json
+from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
@@ -131,19 +132,25 @@ def load_refiner(path: str | Path, meta: dict) -> RefineNet | None:
     return net.eval()
 
 
-def _export(module: torch.nn.Module, inputs: tuple, path: str | Path, **names) -> Path:
-    """Export ``module`` (eval mode for the export) on example ``inputs`` to ONNX at ``path``,
-    atomically; ``names``: ``input_names``, ``output_names``, ``dynamic_axes``."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
+def onnx_bytes(module: torch.nn.Module, inputs: tuple, **names) -> bytes:
+    """``module`` (eval mode for the export) exported on example ``inputs`` to an ONNX model;
+    ``names``: ``input_names``, ``output_names``, ``dynamic_axes``."""
+    buf = io.BytesIO()
     was_training = module.training
     module.eval()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        torch.onnx.export(module, inputs, str(tmp), dynamo=False, opset_version=17, **names)
-    os.replace(tmp, path)
-    module.train(was_training)
-    return path
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            torch.onnx.export(module, inputs, buf, dynamo=False, opset_version=17, **names)
+    finally:
+        module.train(was_training)
+    return buf.getvalue()
+
+
+def _export(module: torch.nn.Module, inputs: tuple, path: str | Path, **names) -> Path:
+    """:func:`onnx_bytes` written to ``path`` atomically."""
+    atomic_write_bytes(path, onnx_bytes(module, inputs, **names))
+    return Path(path)
 
 
 def export_onnx(model: CornerNet, path: str | Path) -> Path:
