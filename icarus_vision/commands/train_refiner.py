@@ -35,6 +35,13 @@ def train_refiner_cmd(
         "16,32,64", help="Channels of a new refiner's three stages, comma-separated."
     ),
     hidden: int = typer.Option(64, min=1, help="Units of a new refiner's hidden layer."),
+    square_hfov: float = typer.Option(
+        0.0,
+        min=0.0,
+        max=170.0,
+        help="Also tell a new refiner how square each candidate is in 3-D under a camera of "
+        "this horizontal field of view, degrees (0: not told).",
+    ),
 ) -> None:
     """Train the refiner: it rectifies each of the first stage's candidate gates into a small
     patch, decides whether it is a gate and corrects its corners.
@@ -51,7 +58,9 @@ def train_refiner_cmd(
 
     result = train_refiner(
         SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
-        resume=resume, refine_config=RefineConfig(patch=patch, widths=parse_widths(widths, 3), hidden=hidden),
+        resume=resume, refine_config=RefineConfig(
+            patch=patch, widths=parse_widths(widths, 3), hidden=hidden, square_hfov_deg=square_hfov
+        ),
         log=lambda s: console.print(s, highlight=False),
     )  # fmt: skip
     print_best(result.best_epoch, result.best_metrics, out, "best/, last/, refiner.onnx")

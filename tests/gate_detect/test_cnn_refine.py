@@ -29,6 +29,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     Verdicts,
     corners_to_offsets,
     extract,
+    geometry,
     homographies,
     offsets_to_corners,
     refine,
@@ -122,11 +123,16 @@ def test_squareness_tells_a_square_from_a_rectangle_in_any_view():
     assert np.abs(wide).max() < 0.25
 
 
-def test_refiners_saved_before_the_squareness_inputs_still_load():
-    old = {k: v for k, v in RefineConfig().to_dict().items() if k != "square_hfov_deg"}
-    cfg = RefineConfig.from_dict(old)
-    assert cfg.square_hfov_deg == 0.0 and cfg.num_geom == 11
-    assert RefineConfig().num_geom == 13
+def test_the_squareness_inputs_widen_the_refiners_input():
+    cfg = RefineConfig(patch=40, margin=8, square_hfov_deg=95.0)
+    assert RefineConfig().num_geom == 11 and cfg.num_geom == 13
+    net = RefineNet(cfg).eval()
+    quads = np.stack([QUAD, QUAD + 20.0])
+    geom = geometry(quads, np.full((2, 3), 0.5, np.float32), (320, 240), cfg)
+    np.testing.assert_allclose(geom[:, 11:], squareness(quads, (320, 240), 95.0), atol=1e-6)
+    with torch.no_grad():
+        assert net(torch.rand(2, 3, 40, 40), torch.from_numpy(geom)).shape == (2, 9)
+    assert RefineConfig.from_dict(cfg.to_dict()) == cfg
 
 
 def test_usable_refuses_degenerate_candidates():

@@ -118,3 +118,4 @@ def test_train_refiner_builds_the_refiner_asked_for_and_tunes_it(tiny_dataset, t
     default = RefineConfig()
     assert params["widths"].default == ",".join(map(str, default.widths))
     assert params["hidden"].default == default.hidden
+    assert params["square_hfov"].default == default.square_hfov_deg
