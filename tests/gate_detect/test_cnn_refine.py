@@ -12,7 +12,7 @@ import torch
 
 from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.base import FLIP_ORDER
-from icarus_vision.gate_detect.cnn import CnnDetector
+from icarus_vision.gate_detect.cnn import CnnDetector, OnnxRuntimeNet
 from icarus_vision.gate_detect.cnn import refine_train as rt
 from icarus_vision.gate_detect.cnn.checkpoint import (
     export_refiner_onnx,
@@ -279,6 +279,7 @@ def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     dets = [CnnDetector(corner, DecodeConfig(centre_threshold=0.0), refiner=every, **kw)
             for kw in settings]  # fmt: skip
     a, *others = (d.detect(img) for d in dets)
+    assert isinstance(dets[2].refiner, OnnxRuntimeNet) and isinstance(dets[2].model, OnnxRuntimeNet)
     assert len(a) > 0
     for b in others:
         assert len(a) == len(b)

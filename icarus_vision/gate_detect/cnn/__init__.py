@@ -175,12 +175,13 @@ class CnnDetector(Detector):
             # channels-last like the patches it reads (refine.to_tensor makes no copy)
             self.refiner = fuse_batchnorm(copy.deepcopy(refiner).eval())
             self.refiner = self.refiner.to(memory_format=torch.channels_last)
-            if frozen:
-                p = refiner.cfg.patch
-                patches = torch.zeros(2, p, p, 3).permute(0, 3, 1, 2)
-                self.refiner = frozen_trace(
-                    self.refiner, (patches, torch.zeros(2, refiner.cfg.num_geom))
-                )
+            p = refiner.cfg.patch
+            example = (torch.zeros(2, p, p, 3).permute(0, 3, 1, 2),
+                       torch.zeros(2, refiner.cfg.num_geom))  # fmt: skip
+            if backend == "onnxruntime":
+                self.refiner = OnnxRuntimeNet(self.refiner, example, threads)
+            elif frozen:
+                self.refiner = frozen_trace(self.refiner, example)
 
     @property
     def model(self) -> nn.Module:
