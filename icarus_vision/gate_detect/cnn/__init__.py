@@ -90,7 +90,7 @@ class OnnxRuntimeNet:
         self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
 
     def __call__(self, *inputs: torch.Tensor) -> torch.Tensor:
-        feed = {n: np.ascontiguousarray(t.detach().numpy(), dtype=np.float32)
+        feed = {n: np.ascontiguousarray(t.detach().float().numpy())
                 for n, t in zip(self._names, inputs, strict=True)}  # fmt: skip
         return torch.from_numpy(self._session.run(None, feed)[0])
 
@@ -184,7 +184,7 @@ class CnnDetector(Detector):
                 self.refiner = frozen_trace(self.refiner, example)
 
     @property
-    def model(self) -> nn.Module:
+    def model(self) -> nn.Module | OnnxRuntimeNet:
         """The network that runs (built on first use of each setting): an
         :class:`OnnxRuntimeNet` on that backend; else a bfloat16 copy when :attr:`bf16` (weights
         cast once, not per call as autocast would; about 0.3 ms less per frame), else the

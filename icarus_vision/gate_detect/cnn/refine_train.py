@@ -543,6 +543,6 @@ def train_refiner(
         save(best_dir, done["epoch"], {"val": metrics, "val_untuned": untuned})
         best = (best[0], best[1], metrics)
         if log is not None:
-            log(f"gate threshold and snap radius tuned on val: {tuned}")
+            log(f"gate threshold, snap radius and mirrored reading tuned on val: {tuned}")
     export_refiner_onnx(best_net, out / REFINER_ONNX)
     return RefineResult(out, best[1], best[2], history)
