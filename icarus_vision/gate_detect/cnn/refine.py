@@ -99,11 +99,8 @@ def squareness(quads: np.ndarray, image_size: tuple[int, int], hfov_deg: float) 
     f = 0.5 * w / np.tan(np.radians(hfov_deg) / 2.0)
     k_inv = np.array([[1.0 / f, 0.0, -(w - 1) / (2.0 * f)],
                       [0.0, 1.0 / f, -(h - 1) / (2.0 * f)], [0.0, 0.0, 1.0]])  # fmt: skip
-    unit = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]], np.float32)
-    hom = np.empty((len(quads), 3, 3))
-    for i, q in enumerate(np.asarray(quads, np.float32)):
-        hom[i] = cv2.getPerspectiveTransform(unit, q)
-    m = k_inv @ hom
+    unit = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    m = k_inv @ perspective(unit, quads)
     r1, r2 = m[:, :, 0], m[:, :, 1]
     n1, n2 = np.linalg.norm(r1, axis=1), np.linalg.norm(r2, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -182,10 +179,20 @@ def homographies(quads: np.ndarray, cfg: RefineConfig) -> np.ndarray:
     Args:
         quads: (N, 4, 2) candidate corners, camera pixels, TL, TR, BR, BL.
     """
-    dst = square(cfg).astype(np.float32)
-    out = np.empty((len(quads), 3, 3))
-    for i, q in enumerate(np.asarray(quads, np.float32)):
-        out[i] = cv2.getPerspectiveTransform(q, dst)
+    return perspective(quads, square(cfg))
+
+
+def perspective(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) homographies taking (4, 2) ``src`` corners onto ``dst`` corners, either side
+    (N, 4, 2) or one (4, 2) shared by all (OpenCV, in float32)."""
+    src, dst = np.asarray(src, np.float32), np.asarray(dst, np.float32)
+    n = len(src) if src.ndim == 3 else len(dst) if dst.ndim == 3 else 1
+    src, dst = np.broadcast_to(src, (n, 4, 2)), np.broadcast_to(dst, (n, 4, 2))
+    out = np.empty((n, 3, 3))
+    for i in range(n):
+        out[i] = cv2.getPerspectiveTransform(
+            np.ascontiguousarray(src[i]), np.ascontiguousarray(dst[i])
+        )
     return out
 
 
