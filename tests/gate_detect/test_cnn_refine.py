@@ -229,6 +229,61 @@ def test_mirrored_reading_is_mirror_symmetric():
     np.testing.assert_allclose(a.prob, 1 / (1 + np.exp(-logit)), atol=1e-4)
 
 
+def test_a_second_pass_reads_again_where_the_first_put_the_corners():
+    img, net = _gate_image(), _refiner(5)
+    cand = QUAD + np.array([[4.0, 2.0], [-3.0, 3.0], [0.0, -4.0], [2.5, 0.5]])
+    once = verdicts(net, img, [(cand, np.ones(4), 0.9)], CFG)
+    twice = verdicts(net, img, [(cand, np.ones(4), 0.9)], replace(CFG, passes=2))
+    again = verdicts(net, img, [(once.corners[0], np.ones(4), 0.9)], CFG)
+    np.testing.assert_allclose(twice.prob, again.prob, atol=1e-6)
+    np.testing.assert_allclose(twice.corners, again.corners, atol=1e-6)
+    assert np.abs(twice.corners - once.corners).max() > 0.05
+    for bad in ({"passes": 0}, {"candidate_iou": 0.0}):
+        with pytest.raises(ValueError, match="passes must be >= 1 and candidate_iou"):
+            RefineNet(replace(CFG, **bad))
+
+
+def test_candidates_overlap_more_than_the_detectors_output():
+    torch.manual_seed(0)
+    refiner = RefineNet(RefineConfig(patch=16, margin=4, candidate_iou=0.9))
+    det = CnnDetector(CornerNet(TINY_MODEL), DecodeConfig(nms_iou=0.4), refiner=refiner,
+                      backend="torch")  # fmt: skip
+    assert det.decode_cfg.nms_iou == 0.9 and det.nms_iou == 0.4
+    assert CnnDetector(CornerNet(TINY_MODEL), DecodeConfig(nms_iou=0.4)).decode_cfg.nms_iou == 0.4
+
+
+def test_first_stage_reads_the_input_size_and_reports_camera_pixels():
+    seen = []
+
+    def net(x: torch.Tensor) -> torch.Tensor:  # one gate centre in the middle cell, stride 4
+        seen.append(tuple(x.shape[-2:]))
+        out = torch.full((len(x), 15, x.shape[-2] // 4, x.shape[-1] // 4), -9.0)
+        out[:, 0, out.shape[-2] // 2, out.shape[-1] // 2] = 9.0
+        out[:, 7:] = torch.tensor([-1, -1, 1, -1, 1, 1, -1, 1.0])[:, None, None]  # 16 cells wide
+        return out
+
+    images = np.zeros((2, 240, 320, 3), np.uint8)
+    cfg = DecodeConfig(nested=False)
+    for size in ((320, 240), (256, 192)):
+        (gates, _), _ = rt.first_stage(net, images, cfg, input_size=size)
+        assert seen[-1] == size[::-1]
+        corners = gates[0][0]
+        np.testing.assert_allclose(corners.mean(axis=0), [159.5, 119.5])
+        np.testing.assert_allclose(mean_sides(corners), 16 * 320 / size[0] * 4, rtol=1e-6)
+
+
+def test_tune_chooses_the_input_size_mirroring_and_passes(tiny_dataset):
+    split = load_split(tiny_dataset, "val", (160, 120))
+    torch.manual_seed(0)
+    first = CornerNet(TINY_MODEL).eval()
+    sizes = rt.input_sizes((160, 120))
+    assert sizes == [(160, 120), (128, 96)]
+    per_size = {s: rt.first_stage(first, split.images, rt.CANDIDATES, input_size=s) for s in sizes}
+    cfg, size, metrics = rt.tune(_refiner(), split, per_size, CFG)
+    assert size in sizes and cfg.passes in rt.PASSES and cfg.threshold in rt.THRESHOLDS
+    assert {"precision", "recall", "pck", "detections"} <= metrics.keys()
+
+
 def test_select_keeps_scores_over_the_threshold_best_first_without_overlaps():
     q = np.stack([QUAD, QUAD + 1.0, QUAD + 150.0, QUAD - 90.0])
     v = Verdicts(prob=np.array([0.9, 0.95, 0.8, 0.2]), stage=np.array([0.5, 0.9, 1.0, 1.0]),
@@ -239,6 +294,24 @@ def test_select_keeps_scores_over_the_threshold_best_first_without_overlaps():
     assert [round(f[2], 3) for f in found] == [0.855, 0.8]
     np.testing.assert_array_equal(found[0][0], QUAD + 1.0)
     assert select(Verdicts.empty(), peaks, RefineConfig()) == []
+
+
+def test_select_drops_big_openings_that_are_not_square_when_asked():
+    def box(w: float, h: float, cx: float = 160.0) -> np.ndarray:  # facing the camera
+        return np.array([[cx - w / 2, 120 - h / 2], [cx + w / 2, 120 - h / 2],
+                         [cx + w / 2, 120 + h / 2], [cx - w / 2, 120 + h / 2]])  # fmt: skip
+
+    q = np.stack([box(48, 48, 60), box(64, 40, 250), box(24, 15, 160)])  # 1:1, 1.6:1, small 1.6:1
+    skew = np.abs(squareness(q, (320, 240), 95.0)[:, 0])
+    assert skew[0] < 0.05 and skew[1] > 0.4
+    v = Verdicts(np.full(3, 0.9), np.ones(3), q, skew)
+    peaks = [(np.zeros((0, 2)), np.zeros(0))] * 4
+    checked = select(v, peaks, RefineConfig(max_skew=0.4, skew_min_px=30.0))
+    assert [f[0][0, 0] for f in checked] == [36.0, 148.0]  # the big rectangle is dropped
+    assert len(select(v, peaks, RefineConfig())) == 3
+    img = _gate_image()  # verdicts measure it
+    got = verdicts(_refiner(), img, [(QUAD, np.ones(4), 0.9)], CFG)
+    np.testing.assert_allclose(got.skew, np.abs(squareness(got.corners, (320, 240), 95.0)[:, 0]))
 
 
 def test_verdicts_skip_candidates_under_the_floor():

@@ -153,6 +153,7 @@ class CnnDetector(Detector):
         if threads is not None and torch.get_num_threads() != threads:
             torch.set_num_threads(threads)
         self.decode_cfg = decode_cfg
+        self.nms_iou = decode_cfg.nms_iou  # of the output (with a refiner, not its candidates')
         self.input_size = tuple(model.cfg.input_size)
         if backend == "onnxruntime" and bf16:
             raise ValueError("bf16 runs on the torch backend only")
@@ -171,7 +172,9 @@ class CnnDetector(Detector):
             # No candidate whose centre scores under the refiner's threshold can pass it (its
             # score is at most the centre's), so none is decoded: the same output, faster.
             floor = max(decode_cfg.centre_threshold, refiner.cfg.threshold)
-            self.decode_cfg = replace(decode_cfg, centre_threshold=floor)
+            self.decode_cfg = replace(
+                decode_cfg, centre_threshold=floor, nms_iou=refiner.cfg.candidate_iou
+            )
             # channels-last like the patches it reads (refine.to_tensor makes no copy)
             self.refiner = fuse_batchnorm(copy.deepcopy(refiner).eval())
             self.refiner = self.refiner.to(memory_format=torch.channels_last)
@@ -239,8 +242,7 @@ class CnnDetector(Detector):
                 found = decode(o, self.decode_cfg, scale)
             else:
                 cand, peaks = decode(o, self.decode_cfg, scale, with_peaks=True)
-                found = refine(self.refiner, im, cand, peaks, self.refine_cfg,
-                               self.decode_cfg.nms_iou)  # fmt: skip
+                found = refine(self.refiner, im, cand, peaks, self.refine_cfg, self.nms_iou)
             results.append([GateDetection(c, s, score) for c, s, score in found])
         return results
 

@@ -18,7 +18,8 @@ is then snapped to the first stage's nearest peak of its corner type within ``sn
 side (on val, the refiner's own corners were the better ones, so the shipped detector does not).
 
 Optionally (``RefineConfig.mirror``) each candidate is read a second time mirrored, and the two
-readings are averaged.
+readings are averaged; and (``RefineConfig.passes``) read again where the last reading put its
+corners.
 
 Shapes: patches (B, 3, P, P) float in [0, 1]; network output (B, 9).
 """
@@ -60,6 +61,23 @@ class RefineConfig:
     mirror: bool = False
     """Also read each candidate mirrored and average the two readings (test-time augmentation:
     twice the refiner's work)."""
+    passes: int = 1
+    """Readings of each candidate: each after the first reads the patch again where the last one
+    put the corners, and its gate probability and corners replace the last one's (the patch is
+    then better centred; on val, a second pass raised PCK@5px: README)."""
+    candidate_iou: float = 0.85
+    """First-stage candidates overlapping a better-scored one by more than this (intersection
+    over union) are dropped before the refiner reads them (the refiner's own output is
+    de-duplicated at the decoding's ``nms_iou``). Looser than that, gates seen through a gate of
+    nearly the same apparent size each keep their candidate."""
+    max_skew: float = 0.0
+    """A gate whose opening's mean side is at least ``skew_min_px`` is reported only if, seen
+    by a nominal camera (:data:`NOMINAL_HFOV_DEG`), its opening is square in 3-D within a ratio
+    of sides of e^``max_skew`` (:func:`squareness`): gates are square, and most gate-like
+    distractors are not, though the patch, rectified to a square, hides it. 0: no check."""
+    skew_min_px: float = 30.0
+    """Smallest mean side of a gate whose squareness is checked, pixels (the 3-D aspect of a
+    smaller one is too uncertain)."""
     square_hfov_deg: float = 0.0
     """Horizontal field of view of the nominal camera under which the refiner is also told how
     square each candidate is in 3-D (:func:`squareness`), degrees; 0: not told. (Measured on
@@ -81,6 +99,12 @@ class RefineConfig:
     @classmethod
     def from_dict(cls, d: dict) -> RefineConfig:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+NOMINAL_HFOV_DEG = 95.0
+"""Field of view of the camera under which ``RefineConfig.max_skew`` is checked, degrees (the
+middle of the dataset recipe's 80-110 degrees; another field of view shifts the aspect a
+little)."""
 
 
 def squareness(quads: np.ndarray, image_size: tuple[int, int], hfov_deg: float) -> np.ndarray:
@@ -149,6 +173,8 @@ class RefineNet(nn.Module):
         super().__init__()
         if cfg.patch % 8 or not 0 < cfg.margin < cfg.patch // 2:
             raise ValueError(f"patch must be a multiple of 8 with 0 < margin < patch/2: {cfg}")
+        if cfg.passes < 1 or not 0.0 < cfg.candidate_iou <= 1.0:
+            raise ValueError(f"passes must be >= 1 and candidate_iou in (0, 1]: {cfg}")
         c1, c2, c3 = cfg.widths
         self.cfg = cfg
         self.features = nn.Sequential(
@@ -279,15 +305,18 @@ class Verdicts:
         prob: (N,) gate probability of each candidate it looked at.
         stage: (N,) the first stage's score of each.
         corners: (N, 4, 2) corrected corners, camera pixels.
+        skew: (N,) |log of the ratio of the opening's sides| in 3-D under the nominal camera
+            (:func:`squareness`); None: not known (never fails ``RefineConfig.max_skew``).
     """
 
     prob: np.ndarray
     stage: np.ndarray
     corners: np.ndarray
+    skew: np.ndarray | None = None
 
     @classmethod
     def empty(cls) -> Verdicts:
-        return cls(np.zeros(0), np.zeros(0), np.zeros((0, 4, 2)))
+        return cls(np.zeros(0), np.zeros(0), np.zeros((0, 4, 2)), np.zeros(0))
 
 
 def verdicts(
@@ -305,7 +334,8 @@ def verdicts(
         image: (H, W, 3) uint8 RGB camera frame.
         gates: first-stage candidates ``(corners (4, 2) px, corner_scores (4,), score)``.
         cfg: patch geometry; with ``cfg.mirror``, each candidate is also read mirrored and the
-            two readings are averaged (logits, and corners in the image).
+            two readings are averaged (logits, and corners in the image); ``cfg.passes``
+            readings, each where the last one put the corners.
         floor: candidates the first stage scored under this are not looked at (default
             ``cfg.threshold``: the refiner's probability is at most 1, so they cannot pass).
         dtype: the network's input dtype.
@@ -319,6 +349,25 @@ def verdicts(
     if not ok.any():
         return Verdicts.empty()
     quads, scores = quads[ok], stage_scores(gates)[ok]
+    for _ in range(cfg.passes):
+        logit, corners = read(net, image, quads, scores, cfg, dtype)
+        again = usable(corners)  # a reading that folded a candidate: keep the last corners
+        quads = np.where(again[:, None, None], corners, quads)
+    stage = np.array([g[2] for g in gates])[ok]
+    skew = np.abs(squareness(quads, image.shape[1::-1], NOMINAL_HFOV_DEG)[:, 0])
+    return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, quads, skew)
+
+
+def read(
+    net: nn.Module,
+    image: np.ndarray,
+    quads: np.ndarray,
+    scores: np.ndarray,
+    cfg: RefineConfig,
+    dtype: torch.dtype = torch.float32,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One reading of (N, 4, 2) usable candidates with (N, 3) first-stage scores: (N,) gate
+    logits and (N, 4, 2) corrected corners, camera pixels (``cfg.mirror``: see :func:`verdicts`)."""
     n, size = len(quads), image.shape[1::-1]
     seen = quads
     if cfg.mirror:  # the mirrored reading: corner order swapped, so the patch comes out mirrored
@@ -339,8 +388,7 @@ def verdicts(
     if cfg.mirror:
         logit = 0.5 * (logit + out[n:, 0])
         corners = 0.5 * (corners[:n] + corners[n:][:, FLIP_ORDER])
-    stage = np.array([g[2] for g in gates])[ok]
-    return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, corners)
+    return logit, corners
 
 
 def select(
@@ -349,8 +397,9 @@ def select(
     cfg: RefineConfig,
     nms_iou: float = 0.5,
 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """The gates among one image's :class:`Verdicts`: score at least ``cfg.threshold``, corners
-    (snapped when ``cfg.snap``) finite, not overlapping a better gate by more than ``nms_iou``.
+    """The gates among one image's :class:`Verdicts`: score at least ``cfg.threshold``, square
+    enough (``cfg.max_skew``), corners (snapped when ``cfg.snap``) finite, not overlapping a
+    better gate by more than ``nms_iou``.
 
     Returns:
         per gate ``(corners (4, 2) px, corner_scores (4,), score)``, best first.
@@ -358,7 +407,10 @@ def select(
     from icarus_vision.gate_detect.cnn.decode import quad_iou
 
     score = v.prob * v.stage
-    keep = np.flatnonzero(score >= cfg.threshold)
+    ok = score >= cfg.threshold
+    if cfg.max_skew > 0 and v.skew is not None:
+        ok &= (v.skew <= cfg.max_skew) | (mean_sides(v.corners) < cfg.skew_min_px)
+    keep = np.flatnonzero(ok)
     if not len(keep):
         return []
     keep = keep[np.argsort(-score[keep], kind="stable")]

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import itertools
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import torch
 
@@ -92,16 +94,28 @@ def _release_free_memory() -> None:
         pass
 
 
-def first_stage(model: torch.nn.Module, images: np.ndarray, cfg: DecodeConfig, batch: int = 32):
-    """Per image ``(gates, peaks)`` of the corner network (eval) decoded with ``cfg``."""
+def first_stage(
+    model: torch.nn.Module,
+    images: np.ndarray,
+    cfg: DecodeConfig,
+    batch: int = 32,
+    input_size: tuple[int, int] | None = None,
+):
+    """Per image ``(gates, peaks)`` of the corner network (eval) decoded with ``cfg``, camera
+    pixels; the network reads the images resized to ``input_size`` (None: as they are), as
+    :class:`~icarus_vision.gate_detect.cnn.CnnDetector` does."""
     out = []
+    h, w = images.shape[1:3]
     with torch.inference_mode():
         for i in range(0, len(images), batch):
-            x = torch.from_numpy(images[i : i + batch]).permute(0, 3, 1, 2).float() / 255.0
-            maps = model(x)
-            for m, im in zip(maps, images[i : i + batch], strict=True):
-                scale = (im.shape[1] / m.shape[-1], im.shape[0] / m.shape[-2])
-                out.append(decode(m.float(), cfg, scale, with_peaks=True))
+            x = images[i : i + batch]
+            if input_size is not None and tuple(input_size) != (w, h):
+                x = np.stack([cv2.resize(im, input_size, interpolation=cv2.INTER_AREA) for im in x])
+            maps = model(torch.from_numpy(x).permute(0, 3, 1, 2).float() / 255.0)
+            for m in maps:
+                out.append(
+                    decode(m.float(), cfg, (w / m.shape[-1], h / m.shape[-2]), with_peaks=True)
+                )
             del x, maps
             _release_free_memory()
     return out
@@ -124,9 +138,15 @@ def label(quads: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return targets
 
 
-def collect(model: torch.nn.Module, split: Split, cfg: DecodeConfig = CANDIDATES) -> Candidates:
-    """Run the first stage over ``split`` (loaded at camera resolution) and label its candidates."""
-    per_image = first_stage(model, split.images, cfg)
+def collect(
+    model: torch.nn.Module,
+    split: Split,
+    cfg: DecodeConfig = CANDIDATES,
+    input_size: tuple[int, int] | None = None,
+) -> Candidates:
+    """Run the first stage over ``split`` (loaded at camera resolution; the network reads it at
+    ``input_size``) and label its candidates."""
+    per_image = first_stage(model, split.images, cfg, input_size=input_size)
     idx, quads, targets, scores = [], [], [], []
     for i, ((gates, _), truth) in enumerate(zip(per_image, split.gates, strict=True)):
         q = np.array([g[0] for g in gates], float).reshape(-1, 4, 2)
@@ -258,33 +278,58 @@ def evaluate(
 THRESHOLDS = (0.15, 0.2, 0.25, 0.3, 0.35, 0.4)
 SNAPS = (0.0, 0.05)
 MIRRORS = (False, True)
+PASSES = (1, 2)
+SKEWS = (0.0, 0.4)
+INPUT_SCALES = (1.0, 0.8)
+"""Corner-network input sizes tried by :func:`tune`, as fractions of the camera frame (the
+network is convolutional; the refiner reads the full frame, so the first stage's precision
+matters less than its speed)."""
+
+
+def input_sizes(image_size: tuple[int, int], scales: tuple[float, ...] = INPUT_SCALES):
+    """(W, H) corner-network input sizes, one per scale of ``image_size``."""
+    return [(round(image_size[0] * s), round(image_size[1] * s)) for s in scales]
 
 
 def tune(
     net,
     split: Split,
-    per_image: list,
+    per_size: dict[tuple[int, int], list],
     cfg: RefineConfig,
     min_gate_px: float = 20.0,
     mirrors: tuple[bool, ...] = MIRRORS,
-) -> tuple[RefineConfig, dict]:
-    """The gate threshold, snap radius and mirrored reading (grids above) with the best
-    validation score (:func:`~icarus_vision.gate_detect.cnn.tune.score`); near-ties go to the
-    fewest detections, then to the first tried (no mirroring, the higher threshold). The refiner
-    reads the split once per mirror setting."""
+    passes: tuple[int, ...] = PASSES,
+) -> tuple[RefineConfig, tuple[int, int], dict]:
+    """The gate threshold, snap radius, squareness check, mirrored reading, passes (grids above)
+    and the corner network's input size with the best validation score
+    (:func:`~icarus_vision.gate_detect.cnn.tune.score`); near-ties go to the fewest
+    detections, then to the first tried (the first input size, no mirroring, one pass, the
+    higher threshold, no check). The refiner reads the split once per input size, mirroring and
+    number of passes.
+
+    Args:
+        per_size: first-stage output on ``split`` (:func:`first_stage`, decoded with
+            ``cfg.candidate_iou``) per corner-network input size (W, H).
+
+    Returns:
+        (refiner config, input size, its val metrics).
+    """
     from icarus_vision.gate_detect.cnn.tune import choose
 
     net.eval()
     tried = []
-    for m in mirrors:
-        c = replace(cfg, mirror=m)
-        read = [verdicts(net, im, g, c, floor=min(THRESHOLDS))
-                for im, (g, _) in zip(split.images, per_image, strict=True)]  # fmt: skip
-        for t in THRESHOLDS[::-1]:
-            for s in SNAPS:
-                c = replace(cfg, threshold=t, snap=s, mirror=m)
-                tried.append((c, evaluate(net, split, per_image, c, min_gate_px, read=read)))
-    return choose(tried)
+    for size, per_image in per_size.items():
+        for m in mirrors:
+            for k in passes:
+                c = replace(cfg, mirror=m, passes=k)
+                read = [verdicts(net, im, g, c, floor=min(THRESHOLDS))
+                        for im, (g, _) in zip(split.images, per_image, strict=True)]  # fmt: skip
+                for t, s, q in itertools.product(THRESHOLDS[::-1], SNAPS, SKEWS):
+                    c = replace(cfg, threshold=t, snap=s, mirror=m, passes=k, max_skew=q)
+                    metrics = evaluate(net, split, per_image, c, min_gate_px, read=read)
+                    tried.append(((c, size), metrics))
+    (best, size), metrics = choose(tried)
+    return best, size, metrics
 
 
 def train_epoch(
@@ -455,15 +500,25 @@ def train_refiner(
     dirs = list(data_dir) if isinstance(data_dir, list | tuple) else [data_dir]
     if not dirs:
         raise ValueError("no training data given")
-    train = concat_splits([load_split(d, "train", size, cfg.limit) for d in dirs])
+    # a finished run resumed is only tuned again: no training data needed
+    finished = resume and meta.get("refine_training", {}).get("epoch", 0) >= cfg.epochs
+    train = None if finished else concat_splits(
+        [load_split(d, "train", size, cfg.limit) for d in dirs]
+    )  # fmt: skip
     val = load_split(dirs[0], "val", size, cfg.limit)
     if log is not None:
-        log(f"first-stage candidates of {len(train.files)} + {len(val.files)} images ...")
-    cands, val_cands = collect(first, train), collect(first, val)
+        n = 0 if train is None else len(train.files)
+        log(f"first-stage candidates of {n} + {len(val.files)} images ...")
+    cand_cfg = replace(CANDIDATES, nms_iou=net.cfg.candidate_iou)
+    trained_size = tuple(corner_net.cfg.input_size)
+    val_cands = collect(first, val, cand_cfg, trained_size)
+    cands = None if train is None else collect(first, train, cand_cfg, trained_size)
     rcfg = replace(net.cfg, threshold=RefineConfig.threshold, snap=0.0)  # tuned at the end
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    n_jitter = len(jittered_truth(train, np.random.default_rng(0))[0])
-    steps_per_epoch = int(np.ceil((len(cands.image) + n_jitter) / cfg.batch_size))
+    steps_per_epoch = 1
+    if train is not None:
+        n_jitter = len(jittered_truth(train, np.random.default_rng(0))[0])
+        steps_per_epoch = int(np.ceil((len(cands.image) + n_jitter) / cfg.batch_size))
     total = cfg.epochs * steps_per_epoch
     sched = torch.optim.lr_scheduler.LambdaLR(
         opt, lambda s: float(min((s + 1) / 100, 0.5 * (1 + np.cos(np.pi * min(s / total, 1.0)))))
@@ -534,15 +589,19 @@ def train_refiner(
     _, _, best_meta = load_checkpoint(best_dir)
     best_net = load_refiner(best_dir, best_meta)
     if cfg.tune:
-        tuned, metrics = tune(best_net, val, val_cands.per_image, best_net.cfg, cfg.min_gate_px)
+        per_size = {s: val_cands.per_image if s == trained_size
+                    else first_stage(first, val.images, cand_cfg, input_size=s)
+                    for s in input_sizes(size)}  # fmt: skip
+        tuned, input_size, metrics = tune(best_net, val, per_size, best_net.cfg, cfg.min_gate_px)
         best_net = RefineNet(tuned)
         best_net.load_state_dict(load_refiner(best_dir, best_meta).state_dict())
         net = best_net.eval()  # what save() writes
+        corner_net.cfg = replace(corner_net.cfg, input_size=input_size)
         done = best_meta["refine_training"]  # a finished run resumed is only tuned again
         untuned = done.get("val_untuned", done.get("val"))
         save(best_dir, done["epoch"], {"val": metrics, "val_untuned": untuned})
         best = (best[0], best[1], metrics)
         if log is not None:
-            log(f"gate threshold, snap radius and mirrored reading tuned on val: {tuned}")
+            log(f"tuned on val: corner network input {input_size[0]}x{input_size[1]}; {tuned}")
     export_refiner_onnx(best_net, out / REFINER_ONNX)
     return RefineResult(out, best[1], best[2], history)
