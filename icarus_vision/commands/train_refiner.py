@@ -48,8 +48,10 @@ def train_refiner_cmd(
 
     Writes OUT/best and OUT/last (complete detector checkpoints: the first stage with its
     candidate decoding, plus refiner.safetensors), OUT/refiner.onnx, OUT/history.json and
-    TensorBoard logs in OUT/tb. Ctrl-C saves OUT/last; --resume continues from it. Use the result
-    with --detector cnn:OUT/best.
+    TensorBoard logs in OUT/tb. Ctrl-C saves OUT/last; --resume continues from it. At the end,
+    OUT/best is tuned on val: the gate threshold, snap radius, squareness check, mirrored
+    reading, number of passes and the corner network's input size (--resume on a finished run
+    only tunes again). Use the result with --detector cnn:OUT/best.
     """
     from icarus_vision.commands.train_detector import parse_widths
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED

@@ -412,3 +412,22 @@ def test_jittered_truth_and_candidates_of_a_split(tiny_dataset):
     # each jittered gate stays near (MATCH) the gate it came from, in its image
     d = np.linalg.norm(q - t, axis=-1).mean(axis=1) / mean_sides(t)
     assert np.median(d) < rt.MATCH
+
+
+def test_a_finished_run_resumed_is_only_tuned_again(tiny_dataset, tmp_path, monkeypatch):
+    first = _first_stage(tmp_path)
+    kw = {"refine_config": RefineConfig(patch=16, margin=4), "progress": False}
+    cfg = rt.RefineTrainConfig(batch_size=16)  # tuned at the end
+    rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=1, config=cfg, **kw)
+    best = tmp_path / "a" / "best"
+    weights = (best / "refiner.safetensors").read_bytes()
+    meta = json.loads((best / "detector.json").read_text())
+    assert tuple(meta["model"]["input_size"]) in rt.input_sizes((160, 120))
+    assert meta["refine"]["passes"] in rt.PASSES and meta["refine"]["max_skew"] in rt.SKEWS
+    read = []
+    collect = rt.collect
+    monkeypatch.setattr(rt, "collect", lambda m, split, *a: read.append(split) or collect(m, split))
+    rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=1, resume=True, progress=False)
+    assert [len(s.files) for s in read] == [len(load_split(tiny_dataset, "val").files)]
+    assert (best / "refiner.safetensors").read_bytes() == weights
+    assert json.loads((best / "detector.json").read_text())["refine"] == meta["refine"]

@@ -138,15 +138,9 @@ def label(quads: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return targets
 
 
-def collect(
-    model: torch.nn.Module,
-    split: Split,
-    cfg: DecodeConfig = CANDIDATES,
-    input_size: tuple[int, int] | None = None,
-) -> Candidates:
-    """Run the first stage over ``split`` (loaded at camera resolution; the network reads it at
-    ``input_size``) and label its candidates."""
-    per_image = first_stage(model, split.images, cfg, input_size=input_size)
+def collect(model: torch.nn.Module, split: Split, cfg: DecodeConfig = CANDIDATES) -> Candidates:
+    """Run the first stage over ``split`` (loaded at camera resolution) and label its candidates."""
+    per_image = first_stage(model, split.images, cfg)
     idx, quads, targets, scores = [], [], [], []
     for i, ((gates, _), truth) in enumerate(zip(per_image, split.gates, strict=True)):
         q = np.array([g[0] for g in gates], float).reshape(-1, 4, 2)
@@ -509,10 +503,10 @@ def train_refiner(
     if log is not None:
         n = 0 if train is None else len(train.files)
         log(f"first-stage candidates of {n} + {len(val.files)} images ...")
-    cand_cfg = replace(CANDIDATES, nms_iou=net.cfg.candidate_iou)
-    trained_size = tuple(corner_net.cfg.input_size)
-    val_cands = collect(first, val, cand_cfg, trained_size)
-    cands = None if train is None else collect(first, train, cand_cfg, trained_size)
+    # trained and validated every epoch on the candidates of CANDIDATES with the corner network
+    # reading the camera frames; tuned at the end on those the detector will read (tune)
+    val_cands = collect(first, val)
+    cands = None if train is None else collect(first, train)
     rcfg = replace(net.cfg, threshold=RefineConfig.threshold, snap=0.0)  # tuned at the end
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = 1
@@ -589,8 +583,8 @@ def train_refiner(
     _, _, best_meta = load_checkpoint(best_dir)
     best_net = load_refiner(best_dir, best_meta)
     if cfg.tune:
-        per_size = {s: val_cands.per_image if s == trained_size
-                    else first_stage(first, val.images, cand_cfg, input_size=s)
+        cand_cfg = replace(CANDIDATES, nms_iou=best_net.cfg.candidate_iou)
+        per_size = {s: first_stage(first, val.images, cand_cfg, input_size=s)
                     for s in input_sizes(size)}  # fmt: skip
         tuned, input_size, metrics = tune(best_net, val, per_size, best_net.cfg, cfg.min_gate_px)
         best_net = RefineNet(tuned)
