@@ -155,6 +155,16 @@ def geometry(
     return np.concatenate(parts, axis=1).astype(np.float32)
 
 
+def mirrored(quads: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mirrored reading of (N, 4, 2) candidates in a frame ``width`` pixels wide: the corners
+    to rectify (the corner order swapped, so the patch comes out mirrored) and where the
+    candidate lies in the mirror image (what :func:`geometry` is told)."""
+    flipped = quads[:, FLIP_ORDER]
+    where = flipped.copy()
+    where[..., 0] = width - 1 - where[..., 0]
+    return flipped, where
+
+
 def stage_scores(gates: list[tuple[np.ndarray, np.ndarray, float]]) -> np.ndarray:
     """(N, 3) :func:`geometry` scores of first-stage candidates."""
     return np.array(
@@ -371,13 +381,10 @@ def read(
     logits and (N, 4, 2) corrected corners, camera pixels (``cfg.mirror``: see :func:`verdicts`)."""
     n, size = len(quads), image.shape[1::-1]
     seen = quads
-    if cfg.mirror:  # the mirrored reading: corner order swapped, so the patch comes out mirrored
-        flipped = quads[:, FLIP_ORDER]
+    if cfg.mirror:
+        flipped, where = mirrored(quads, size[0])
         seen = np.concatenate([quads, flipped])
-        mirrored = flipped.copy()
-        mirrored[..., 0] = size[0] - 1 - mirrored[..., 0]
-        both = np.concatenate([quads, mirrored])
-        geom = geometry(both, np.concatenate([scores, scores]), size, cfg)
+        geom = geometry(np.concatenate([quads, where]), np.concatenate([scores, scores]), size, cfg)
     else:
         geom = geometry(quads, scores, size, cfg)
     h = homographies(seen, cfg)

@@ -35,6 +35,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     extract,
     geometry,
     homographies,
+    mirrored,
     select,
     stage_scores,
     to_tensor,
@@ -185,14 +186,14 @@ def make_batch(
     side = mean_sides(quads)
     weight = np.where(side >= SMALL_PX, 1.0, SMALL_WEIGHT).astype(np.float32)
     w = images.shape[2]
-    flip = np.zeros(len(quads), bool)
+    seen = quads  # where each candidate lies, for the geometry inputs
     if rng is not None:
         moved = quads + rng.normal(size=quads.shape) * (0.015 * side)[:, None, None]
         ok = usable(moved)
         quads[ok] = moved[ok]
-        # mirrored: the corner order swapped, so the patch comes out mirrored
-        flip = rng.random(len(quads)) < 0.5
-        quads[flip] = quads[flip][:, FLIP_ORDER]
+        seen = quads.copy()
+        flip = rng.random(len(quads)) < 0.5  # half of them read mirrored
+        quads[flip], seen[flip] = mirrored(quads[flip], w)
         targets[flip] = targets[flip][:, FLIP_ORDER]
     h = homographies(quads, cfg)
     patches = np.concatenate(
@@ -210,8 +211,6 @@ def make_batch(
     off = np.full((len(idx), 8), np.nan)
     if gate.any():
         off[gate] = corners_to_offsets(h[gate], targets[gate], cfg)
-    seen = quads.copy()  # a mirrored candidate is where its mirror image would be
-    seen[flip, :, 0] = w - 1 - seen[flip, :, 0]
     geom = torch.from_numpy(geometry(seen, scores, (w, images.shape[1]), cfg))
     label = torch.from_numpy(gate.astype(np.float32))
     return x, geom, label, torch.from_numpy(off).float(), torch.from_numpy(weight)
