@@ -252,6 +252,13 @@ def test_candidates_overlap_more_than_the_detectors_output():
     assert CnnDetector(CornerNet(TINY_MODEL), DecodeConfig(nms_iou=0.4)).decode_cfg.nms_iou == 0.4
 
 
+def test_refiner_files_from_before_the_new_settings_read_as_they_did():
+    old = {"patch": 48, "margin": 8, "widths": [16, 32, 64], "hidden": 64, "threshold": 0.3}
+    cfg = RefineConfig.from_dict(old)
+    assert (cfg.passes, cfg.candidate_iou, cfg.max_skew) == (1, 0.5, 0.0)
+    assert RefineConfig.from_dict(RefineConfig().to_dict()) == RefineConfig()
+
+
 def test_first_stage_reads_the_input_size_and_reports_camera_pixels():
     seen = []
 

@@ -99,6 +99,7 @@ class RefineConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> RefineConfig:
+        d = {"candidate_iou": 0.5, **d}  # files written before it existed decoded at 0.5
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
