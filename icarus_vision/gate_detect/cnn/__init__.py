@@ -16,7 +16,6 @@ import warnings
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 from torch import nn
@@ -29,7 +28,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
     onnx_bytes,
 )
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
-from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.model import CornerNet, network_input
 from icarus_vision.gate_detect.cnn.refine import RefineNet, refine
 from icarus_vision.gate_detect.registry import register_detector
 
@@ -218,18 +217,15 @@ class CnnDetector(Detector):
         model, decode_cfg, meta = load_checkpoint(path)
         return cls(model, decode_cfg, refiner=load_refiner(path, meta), **settings)
 
-    def _prepare(self, image: np.ndarray) -> np.ndarray:
-        if image.shape[1::-1] != self.input_size:
-            image = cv2.resize(image, self.input_size, interpolation=cv2.INTER_AREA)
-        return image
-
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""
         images = [validate_image(im) for im in images]
         if not images:
             return []
         # (B, H, W, 3) viewed as (B, 3, H, W) is channels-last already: no copy
-        x = torch.from_numpy(np.stack([self._prepare(im) for im in images])).permute(0, 3, 1, 2)
+        x = torch.from_numpy(
+            np.stack([network_input(im, self.input_size) for im in images])
+        ).permute(0, 3, 1, 2)
         x = x.float().div_(255.0)
         net = self.model  # built (and traced) outside inference mode
         with torch.inference_mode():

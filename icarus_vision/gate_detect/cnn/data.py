@@ -16,6 +16,7 @@ from torch.utils.data import Dataset
 
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.augment import make_augment
+from icarus_vision.gate_detect.cnn.model import network_input
 
 
 @dataclass(frozen=True)
@@ -120,7 +121,7 @@ def load_split(
                 raise FileNotFoundError(f"{f}: image file not found")
             continue
         rgb = read_rgb(f)
-        images[i] = cv2.resize(rgb, input_size, interpolation=cv2.INTER_AREA)
+        images[i] = network_input(rgb, input_size)
     size = (int(infos[0]["width"]), int(infos[0]["height"]))
     return Split(files, images, [by_image[im["id"]] for im in infos], infos, size)
 

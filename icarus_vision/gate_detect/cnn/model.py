@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import cv2
+import numpy as np
 import torch
 from torch import nn
 
@@ -70,6 +72,15 @@ class ModelConfig:
             raise ValueError(f"unknown model config keys {sorted(unknown)}")
         d = {"stem_width": 0, **d}  # files written before the stem existed had none
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+def network_input(image: np.ndarray, input_size: tuple[int, int]) -> np.ndarray:
+    """(H, W, 3) frame as the corner network reads it: resized to ``input_size`` (W, H) with
+    ``INTER_AREA``, as it is if already that size (training, validation, tuning and the
+    detector all read frames through this)."""
+    if image.shape[1::-1] == tuple(input_size):
+        return image
+    return cv2.resize(image, tuple(input_size), interpolation=cv2.INTER_AREA)
 
 
 def conv_bn_relu(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:

@@ -19,7 +19,6 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 
@@ -27,6 +26,7 @@ from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.data import Split
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
+from icarus_vision.gate_detect.cnn.model import network_input
 from icarus_vision.gate_detect.cnn.refine import (
     RefineConfig,
     RefineNet,
@@ -110,8 +110,8 @@ def first_stage(
     with torch.inference_mode():
         for i in range(0, len(images), batch):
             x = images[i : i + batch]
-            if input_size is not None and tuple(input_size) != (w, h):
-                x = np.stack([cv2.resize(im, input_size, interpolation=cv2.INTER_AREA) for im in x])
+            if input_size is not None:
+                x = np.stack([network_input(im, input_size) for im in x])
             maps = model(torch.from_numpy(x).permute(0, 3, 1, 2).float() / 255.0)
             for m in maps:
                 out.append(
