@@ -500,16 +500,15 @@ def train_refiner(
     )  # fmt: skip
     val = load_split(dirs[0], "val", size, cfg.limit)
     if log is not None:
-        n = 0 if train is None else len(train.files)
-        log(f"first-stage candidates of {n} + {len(val.files)} images ...")
+        log("a finished run: tuning it again ..." if finished else
+            f"first-stage candidates of {len(train.files)} + {len(val.files)} images ...")  # fmt: skip
     # trained and validated every epoch on the candidates of CANDIDATES with the corner network
     # reading the camera frames; tuned at the end on those the detector will read (tune)
-    val_cands = collect(first, val)
-    cands = None if train is None else collect(first, train)
+    cands, val_cands = (None, None) if finished else (collect(first, train), collect(first, val))
     rcfg = replace(net.cfg, threshold=RefineConfig.threshold, snap=0.0)  # tuned at the end
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = 1
-    if train is not None:
+    if not finished:
         n_jitter = len(jittered_truth(train, np.random.default_rng(0))[0])
         steps_per_epoch = int(np.ceil((len(cands.image) + n_jitter) / cfg.batch_size))
     total = cfg.epochs * steps_per_epoch
