@@ -42,6 +42,20 @@ def train_refiner_cmd(
         help="Also tell a new refiner how square each candidate is in 3-D under a camera of "
         "this horizontal field of view, degrees (0: not told).",
     ),
+    candidate_scale: float = typer.Option(
+        1.0,
+        min=0.1,
+        max=1.0,
+        help="The corner network reads the frames of the training candidates at this fraction "
+        "of the camera's size (0.8: 256x192, as the shipped detector reads them).",
+    ),
+    candidate_iou: float = typer.Option(
+        0.5,
+        min=0.01,
+        max=1.0,
+        help="Training candidates overlapping a better one by more than this are dropped "
+        "(0.85: as the shipped detector does).",
+    ),
 ) -> None:
     """Train the refiner: it rectifies each of the first stage's candidate gates into a small
     patch, decides whether it is a gate and corrects its corners.
@@ -56,11 +70,13 @@ def train_refiner_cmd(
     from icarus_vision.commands.train_detector import parse_widths
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
     from icarus_vision.gate_detect.cnn.refine import RefineConfig
-    from icarus_vision.gate_detect.cnn.refine_train import train_refiner
+    from icarus_vision.gate_detect.cnn.refine_train import RefineTrainConfig, train_refiner
 
     result = train_refiner(
         SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
-        resume=resume, refine_config=RefineConfig(
+        resume=resume,
+        config=RefineTrainConfig(candidate_scale=candidate_scale, candidate_iou=candidate_iou),
+        refine_config=RefineConfig(
             patch=patch, widths=parse_widths(widths, 3), hidden=hidden, square_hfov_deg=square_hfov
         ),
         log=lambda s: console.print(s, highlight=False),

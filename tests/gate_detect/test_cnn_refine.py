@@ -438,3 +438,39 @@ def test_a_finished_run_resumed_is_only_tuned_again(tiny_dataset, tmp_path, monk
     assert read == []  # no split's candidates collected: tuning reads val itself
     assert (best / "refiner.safetensors").read_bytes() == weights
     assert json.loads((best / "detector.json").read_text())["refine"] == meta["refine"]
+
+
+def test_training_candidates_read_at_the_detectors_input(tiny_dataset, tmp_path, monkeypatch):
+    first = _first_stage(tmp_path)
+    kw = {"refine_config": RefineConfig(patch=16, margin=4), "progress": False}
+    seen = []
+    collect = rt.collect
+    monkeypatch.setattr(
+        rt,
+        "collect",
+        lambda m, split, c, at: seen.append((c.nms_iou, at)) or collect(m, split, c, at),
+    )
+    cfg = rt.RefineTrainConfig(batch_size=16, tune=False, candidate_scale=0.8, candidate_iou=0.85)
+    rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=1, config=cfg, **kw)
+    assert seen == [(0.85, (128, 96))] * 2  # train and val, 0.8 of the 160x120 camera
+    meta = json.loads((tmp_path / "a" / "best" / "detector.json").read_text())
+    assert meta["refine_training"]["config"]["candidate_scale"] == 0.8
+    seen.clear()
+    rt.train_refiner(
+        first,
+        tiny_dataset,
+        tmp_path / "b",
+        epochs=1,
+        config=replace(cfg, candidate_scale=1.0, candidate_iou=0.5),
+        **kw,
+    )
+    assert seen == [(0.5, None)] * 2  # the default: camera frames as they are
+    with pytest.raises(ValueError, match="candidate_scale"):
+        rt.train_refiner(
+            first,
+            tiny_dataset,
+            tmp_path / "c",
+            epochs=1,
+            config=replace(cfg, candidate_scale=0.0),
+            **kw,
+        )

@@ -35,7 +35,7 @@ from torch import nn
 
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.model import conv_bn_relu
-from icarus_vision.gate_detect.metrics import mean_sides
+from icarus_vision.gate_detect.metrics import NEXT_CORNER, mean_sides
 
 
 @dataclass(frozen=True)
@@ -257,10 +257,11 @@ def usable(quads: np.ndarray, min_side_px: float = 4.0) -> np.ndarray:
     """(N,) bool: candidates whose quadrilateral is finite, convex, correctly ordered (clockwise
     in the image, y down) and not tiny, so that their homography is well defined."""
     q = np.asarray(quads, float)
-    e = np.roll(q, -1, axis=1) - q  # (N, 4, 2) edges
-    cross = e[..., 0] * np.roll(e, -1, axis=1)[..., 1] - e[..., 1] * np.roll(e, -1, axis=1)[..., 0]
+    e = q[:, NEXT_CORNER] - q  # (N, 4, 2) edges
+    f = e[:, NEXT_CORNER]
+    cross = e[..., 0] * f[..., 1] - e[..., 1] * f[..., 0]
     with np.errstate(invalid="ignore"):
-        big = mean_sides(q) >= min_side_px
+        big = np.sqrt((e * e).sum(axis=-1)).mean(axis=-1) >= min_side_px  # mean_sides
         return np.isfinite(q).all(axis=(1, 2)) & (cross > 0).all(axis=1) & big
 
 

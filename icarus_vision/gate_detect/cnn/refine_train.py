@@ -139,9 +139,15 @@ def label(quads: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return targets
 
 
-def collect(model: torch.nn.Module, split: Split, cfg: DecodeConfig = CANDIDATES) -> Candidates:
-    """Run the first stage over ``split`` (loaded at camera resolution) and label its candidates."""
-    per_image = first_stage(model, split.images, cfg)
+def collect(
+    model: torch.nn.Module,
+    split: Split,
+    cfg: DecodeConfig = CANDIDATES,
+    input_size: tuple[int, int] | None = None,
+) -> Candidates:
+    """Run the first stage over ``split`` (loaded at camera resolution; the network reads it
+    resized to ``input_size``, None: as it is) and label its candidates."""
+    per_image = first_stage(model, split.images, cfg, input_size=input_size)
     idx, quads, targets, scores = [], [], [], []
     for i, ((gates, _), truth) in enumerate(zip(per_image, split.gates, strict=True)):
         q = np.array([g[0] for g in gates], float).reshape(-1, 4, 2)
@@ -391,6 +397,12 @@ class RefineTrainConfig:
     """Smallest gate counted in the validation metrics, pixels."""
     tune: bool = True
     """After training, choose the gate threshold and snap radius on the val split."""
+    candidate_scale: float = 1.0
+    """The corner network reads the frames whose candidates are trained and validated on at
+    this fraction of the camera's size (as the detector does when tuned to a smaller input)."""
+    candidate_iou: float = 0.5
+    """Those candidates are de-duplicated at this overlap (as the detector does at
+    ``RefineConfig.candidate_iou``)."""
 
 
 @dataclass(frozen=True)
@@ -476,6 +488,8 @@ def train_refiner(
     cfg = replace(config or RefineTrainConfig(), epochs=epochs, seed=seed)
     if cfg.epochs < 1:
         raise ValueError(f"epochs must be >= 1, got {cfg.epochs}")
+    if not 0.0 < cfg.candidate_scale <= 1.0 or not 0.0 < cfg.candidate_iou <= 1.0:
+        raise ValueError(f"candidate_scale and candidate_iou must be in (0, 1]: {cfg}")
     out = Path(out_dir)
     last_dir, best_dir = run_folders(out, resume, STATE)
     corner_net, _, meta = load_checkpoint(last_dir if resume else detector)
@@ -502,9 +516,16 @@ def train_refiner(
     if log is not None:
         log("a finished run: tuning it again ..." if finished else
             f"first-stage candidates of {len(train.files)} + {len(val.files)} images ...")  # fmt: skip
-    # trained and validated every epoch on the candidates of CANDIDATES with the corner network
-    # reading the camera frames; tuned at the end on those the detector will read (tune)
-    cands, val_cands = (None, None) if finished else (collect(first, train), collect(first, val))
+    # trained and validated every epoch on the candidates of CANDIDATES (de-duplicated at
+    # cfg.candidate_iou, the corner network reading frames at cfg.candidate_scale); tuned at
+    # the end on those the detector will read (tune)
+    cands, val_cands = None, None
+    if not finished:
+        read_at = input_sizes(size, (cfg.candidate_scale,))[0]
+        read_at = None if read_at == size else read_at
+        cand_cfg = replace(CANDIDATES, nms_iou=cfg.candidate_iou)
+        cands = collect(first, train, cand_cfg, read_at)
+        val_cands = collect(first, val, cand_cfg, read_at)
     rcfg = replace(net.cfg, threshold=RefineConfig.threshold, snap=0.0)  # tuned at the end
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = 1
