@@ -1,0 +1,170 @@
+"""Where the CNN detector's time goes: per stage, per frame, on one core, and the networks' work.
+
+Usage::
+
+    python benchmarks/detector_profile.py [--detector cnn[:PATH]] [--data datasets/gates-v2-test]
+                                          [--frames 200] [--runs 3] [--json PATH]
+
+Runs the stages of ``CnnDetector.detect`` one by one on the first ``--frames`` test frames (one
+thread, after a warm-up pass), ``--runs`` times, and reports the median over runs of the mean ms
+per frame of each stage:
+
+- ``resize``: the frame to the corner network's input (``model.network_input``);
+- ``corner_network``: the corner network (its backend: ONNX Runtime, or PyTorch in bfloat16 on
+  CPUs with bfloat16 arithmetic);
+- ``decode``: its maps to candidate gates (``decode.decode``);
+- ``refiner_network``: the refiner's network calls, all readings of all candidates;
+- ``refiner_rest``: the rest of ``refine.verdicts`` (patch warping, geometry, corners back to
+  the image, squareness);
+- ``select``: thresholds, squareness check and overlap test (``refine.select``).
+
+Also counts the floating-point operations of each network per frame (PyTorch's
+``FlopCounterMode``: a multiply-add is 2) and the rate the core sustained on them (GFLOP/s),
+which bounds what a smaller network could save. Prints one JSON object (also written to
+``--json``) with the machine's 1-minute load average.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from importlib import import_module
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.flop_counter import FlopCounterMode
+
+from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.cnn.decode import decode
+from icarus_vision.gate_detect.cnn.model import network_input
+from icarus_vision.gate_detect.evaluate import one_thread
+
+# the module (the package exports a function of the same name)
+refine = import_module("icarus_vision.gate_detect.cnn.refine")
+DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v2-test"
+STAGES = ("resize", "corner_network", "decode", "refiner_network", "refiner_rest", "select")
+
+
+class _Timed:
+    """A network wrapper that adds up the time spent in its calls and the patches it read."""
+
+    def __init__(self, net) -> None:
+        self.net, self.seconds, self.calls, self.patches = net, 0.0, 0, 0
+
+    def __call__(self, *inputs):
+        t0 = time.perf_counter()
+        out = self.net(*inputs)
+        self.seconds += time.perf_counter() - t0
+        self.calls += 1
+        self.patches += len(inputs[0])
+        return out
+
+
+def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed]:
+    """Mean ms per frame of each stage over ``images``, and the timed refiner (its calls)."""
+    sums = dict.fromkeys(STAGES, 0.0)
+    net = det.model
+    refiner = _Timed(det.refiner)
+    for im in images:
+        t0 = time.perf_counter()
+        x = network_input(im, det.input_size)
+        t1 = time.perf_counter()
+        xt = torch.from_numpy(x[None]).permute(0, 3, 1, 2).float().div_(255.0)
+        with torch.inference_mode():
+            out = net(xt.to(torch.bfloat16) if det.bf16 else xt).float()[0]
+        t2 = time.perf_counter()
+        h, w = im.shape[:2]
+        gates, peaks = decode(
+            out, det.decode_cfg, (w / out.shape[-1], h / out.shape[-2]), with_peaks=True
+        )
+        t3 = time.perf_counter()
+        before = refiner.seconds
+        v = refine.verdicts(refiner, im, gates, det.refine_cfg)
+        t4 = time.perf_counter()
+        refine.select(v, peaks, det.refine_cfg, det.nms_iou)
+        t5 = time.perf_counter()
+        net_s = refiner.seconds - before
+        for k, s in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, net_s, t4 - t3 - net_s, t5 - t4),
+                        strict=True):  # fmt: skip
+            sums[k] += s
+    return {k: 1000.0 * v / len(images) for k, v in sums.items()}, refiner
+
+
+def network_flops(spec: str) -> dict:
+    """Floating-point operations of one corner-network frame and one refiner patch (the
+    float32 modules of the checkpoint of ``spec``)."""
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint, load_refiner
+
+    path = spec.partition(":")[2] or SHIPPED
+    model, _, meta = load_checkpoint(path)
+    refiner = load_refiner(path, meta)
+    w, h = model.cfg.input_size
+    p = refiner.cfg.patch
+    out = {}
+    with torch.no_grad():
+        with FlopCounterMode(display=False) as fc:
+            model.eval()(torch.zeros(1, 3, h, w))
+        out["corner_network"] = fc.get_total_flops()
+        with FlopCounterMode(display=False) as fc:
+            refiner.eval()(torch.zeros(1, 3, p, p), torch.zeros(1, refiner.cfg.num_geom))
+        out["refiner_patch"] = fc.get_total_flops()
+    return out
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--detector", default="cnn")
+    ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    if not (args.data / "annotations" / "test.json").is_file():
+        sys.exit(f"{args.data}: no dataset; generate it first (see benchmarks/detector.py)")
+    det = make_detector(args.detector)
+    if getattr(det, "refiner", None) is None:
+        sys.exit(f"{args.detector}: not a CNN detector with a refiner")
+    images = [read_rgb(f) for f in load_split(args.data, "test", None, args.frames).files]
+    runs = []
+    with one_thread():
+        stage_times(det, images[:20])  # warm-up
+        for _ in range(args.runs):
+            runs.append(stage_times(det, images))
+    per_stage = {k: round(float(np.median([r[0][k] for r in runs])), 3) for k in STAGES}
+    refiner = runs[0][1]
+    flops = network_flops(args.detector)
+    patches = refiner.patches / len(images)
+    mflop = {"corner_network": flops["corner_network"] / 1e6,
+             "refiner_network": flops["refiner_patch"] * patches / 1e6}  # fmt: skip
+    out = {
+        "detector": args.detector,
+        "frames": len(images),
+        "runs": args.runs,
+        "load_avg_1min": round(os.getloadavg()[0], 2),
+        "backend": det.backend,
+        "bf16": det.bf16,
+        "ms_per_frame": per_stage | {"total": round(sum(per_stage.values()), 3)},
+        "refiner_calls_per_frame": round(refiner.calls / len(images), 2),
+        "refiner_patches_per_frame": round(patches, 2),
+        "mflop_per_frame": {k: round(v, 1) for k, v in mflop.items()},
+        "gflop_per_s": {k: round(v / per_stage[k], 1) for k, v in mflop.items()},
+    }
+    for k in (*STAGES, "total"):
+        print(f"{k:16} {out['ms_per_frame'][k]:7.2f} ms")
+    for k in ("corner_network", "refiner_network"):
+        print(
+            f"{k:16} {out['mflop_per_frame'][k]:7.1f} MFLOP/frame, {out['gflop_per_s'][k]} GFLOP/s"
+        )
+    print(json.dumps(out))
+    if args.json is not None:
+        args.json.write_text(json.dumps(out, indent=2))
+    return out
+
+
+if __name__ == "__main__":
+    main()
