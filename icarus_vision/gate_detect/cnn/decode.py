@@ -143,11 +143,9 @@ def nested_gates(
         & (scale < NESTED_SCALE[1])
         & (offset < NESTED_MAX_OFFSET)
     )
-    out = []
-    for m in np.flatnonzero(ok):
-        c = np.where(have[m], q[m], fit[m])
-        out.append((np.stack([c.real, c.imag], axis=1), vals[np.arange(4), idx[m]]))
-    return out
+    c = np.where(have[ok], q[ok], fit[ok])  # (K, 4) complex corners, fitted where missing
+    corners = np.stack([c.real, c.imag], axis=2)
+    return list(zip(corners, vals[np.arange(4), idx[ok]], strict=True))
 
 
 def _snap(
