@@ -52,6 +52,13 @@ def test_race_writes_report_and_plot(tmp_path):
     assert (out / "race.mp4").stat().st_size > 1000
 
 
+def test_train_detector_bad_input_size_is_one_line_error(tmp_path):
+    res = runner.invoke(app, ["train-detector", "--data", str(tmp_path), "--out",
+                              str(tmp_path / "o"), "--input-size", "256"])  # fmt: skip
+    assert res.exit_code == 1 and "--input-size: expected WxH" in res.output
+    assert "Traceback" not in res.output
+
+
 @pytest.mark.parametrize(
     "args, msg",
     [

@@ -40,6 +40,16 @@ def train_detector_cmd(
         help="Validate and keep as best an exponential moving average of the weights, updated "
         "every step with this decay, e.g. 0.999 (0: off).",
     ),
+    init: Path | None = typer.Option(
+        None,
+        help="Start from this detector checkpoint's corner network (its architecture and "
+        "weights) instead of random weights: fine-tuning.",
+    ),
+    input_size: str | None = typer.Option(
+        None,
+        help="Frames are resized to this for the network, WxH [default: the camera's, 320x240].",
+    ),
+    lr: float = typer.Option(3e-3, min=0.0, help="Peak learning rate (lower to fine-tune)."),
 ) -> None:
     """Train the corner network with augmentation; validate every epoch.
 
@@ -56,9 +66,11 @@ def train_detector_cmd(
         model = replace(model, widths=parse_widths(widths))
     if head_width is not None:
         model = replace(model, head_width=head_width)
+    if input_size is not None:
+        model = replace(model, input_size=parse_size(input_size))
     result = train_detector(
-        data, out, epochs=epochs, seed=seed, resume=resume, model_config=model,
-        config=TrainConfig(ignore_below_px=ignore_below_px, ema_decay=ema_decay),
+        data, out, epochs=epochs, seed=seed, resume=resume, model_config=model, init=init,
+        config=TrainConfig(ignore_below_px=ignore_below_px, ema_decay=ema_decay, lr=lr),
         log=lambda s: console.print(s),
     )  # fmt: skip
     print_best(result.best_epoch, result.best_metrics, out, "best/, last/, model.onnx")
@@ -84,3 +96,14 @@ def parse_widths(text: str, n: int = 4) -> tuple[int, ...]:
         example = ",".join(str(16 * 2**i) for i in range(n))
         raise ValueError(f"--widths: expected {n} positive integers like {example}, got {text!r}")
     return w
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``--input-size``: ``WxH``, two positive integers divisible by 4."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        w = h = 0
+    if w < 4 or h < 4 or w % 4 or h % 4:
+        raise ValueError(f"--input-size: expected WxH, multiples of 4, like 256x192, got {text!r}")
+    return w, h

@@ -335,3 +335,22 @@ def test_shipped_cnn_finds_a_rendered_gate(pos):
         found = CnnDetector.load(**settings).detect(frame.rgb)
         assert len(found) == 1
         assert np.linalg.norm(found[0].corners - truth, axis=1).max() < 3.0
+
+
+def test_fine_tuning_starts_from_a_checkpoint_at_another_input_size(tiny_dataset, tmp_path):
+    from dataclasses import replace
+
+    from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
+
+    torch.manual_seed(0)
+    start = CornerNet(TINY_MODEL).eval()
+    save_checkpoint(tmp_path / "start", start, DecodeConfig())
+    cfg = TrainConfig(batch_size=4, bf16=False, tune_decode=False, lr=0.0)  # weights kept
+    other = replace(ModelConfig(), input_size=(64, 48))  # only its input size is taken
+    train_detector(tiny_dataset, tmp_path / "ft", epochs=1, config=cfg, model_config=other,
+                   init=tmp_path / "start", progress=False)  # fmt: skip
+    model, _, meta = load_checkpoint(tmp_path / "ft" / "last")
+    assert model.cfg == replace(TINY_MODEL, input_size=(64, 48))
+    assert meta["training"]["init"] == str(tmp_path / "start")
+    with torch.no_grad():  # same weights (lr 0: only batch-norm statistics move)
+        assert all(torch.equal(a, b) for a, b in zip(model.parameters(), start.parameters()))

@@ -93,6 +93,7 @@ def train_detector(
     model_config: ModelConfig | None = None,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
+    init: str | Path | None = None,
 ) -> TrainResult:
     """Train (or resume training) the corner network.
 
@@ -107,6 +108,9 @@ def train_detector(
         model_config: architecture of a new network.
         progress: show a rich progress bar.
         log: called with one line per epoch.
+        init: start a new run from this checkpoint's weights (folder or file) instead of random
+            ones: its architecture, with ``model_config``'s ``input_size`` (the network is
+            convolutional: fine-tuning it to read frames at another size).
 
     Raises:
         FileNotFoundError / ValueError: bad dataset, or OUT/last present without ``resume`` (or
@@ -120,6 +124,11 @@ def train_detector(
     torch.manual_seed(cfg.seed)
     mcfg = model_config or ModelConfig()
     model = CornerNet(mcfg)
+    if init is not None and not resume:
+        start_from, _, _ = load_checkpoint(init)
+        mcfg = replace(start_from.cfg, input_size=mcfg.input_size)
+        model = CornerNet(mcfg)
+        model.load_state_dict(start_from.state_dict())
     if resume:
         model, _, meta = load_checkpoint(last_dir)
         mcfg = model.cfg
@@ -150,6 +159,8 @@ def train_detector(
 
     writer = SummaryWriter(str(out / "tb"))
     info = {"data": str(data_dir), "config": asdict(cfg)}
+    if init is not None:
+        info["init"] = str(init)
 
     def save_last(epoch: int) -> None:
         save_checkpoint(last_dir, model, decode_cfg, {**info, "epoch": epoch})
