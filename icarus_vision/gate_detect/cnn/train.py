@@ -63,9 +63,10 @@ class TrainConfig:
     a peak near one is not penalised (0: every gate is a target)."""
     tune_decode: bool = True
     """After training, choose the best weights' decoding thresholds on the val split."""
-    bf16: bool = True
-    """Run the forward pass under bfloat16 autocast (about 2x faster on CPUs with AVX512-BF16);
-    the loss, the weights and inference stay float32."""
+    bf16: bool | None = None
+    """Run the forward pass under bfloat16 autocast (about 2x faster on CPUs with AVX512-BF16,
+    about 5x slower on those without); the loss, the weights and inference stay float32. None:
+    where the CPU has bfloat16 arithmetic (recorded as chosen)."""
     ema_decay: float = 0.0
     """Keep an exponential moving average of the weights (and batch-norm statistics), updated
     after every step with this decay; it is what is validated and saved as ``best`` (0: off, the
@@ -116,9 +117,13 @@ def train_detector(
         FileNotFoundError / ValueError: bad dataset, or OUT/last present without ``resume`` (or
             missing with it).
     """
+    from icarus_vision.gate_detect.cnn import native_bf16
+
     cfg = replace(config or TrainConfig(), epochs=epochs, seed=seed)
     if cfg.epochs < 1:
         raise ValueError(f"epochs must be >= 1, got {cfg.epochs}")
+    if cfg.bf16 is None:
+        cfg = replace(cfg, bf16=native_bf16())
     out = Path(out_dir)
     last_dir, best_dir = run_folders(out, resume, STATE)
     torch.manual_seed(cfg.seed)
