@@ -353,4 +353,6 @@ def test_fine_tuning_starts_from_a_checkpoint_at_another_input_size(tiny_dataset
     assert model.cfg == replace(TINY_MODEL, input_size=(64, 48))
     assert meta["training"]["init"] == str(tmp_path / "start")
     with torch.no_grad():  # same weights (lr 0: only batch-norm statistics move)
-        assert all(torch.equal(a, b) for a, b in zip(model.parameters(), start.parameters()))
+        assert all(
+            torch.equal(a, b) for a, b in zip(model.parameters(), start.parameters(), strict=True)
+        )
