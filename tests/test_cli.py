@@ -57,6 +57,9 @@ def test_train_detector_bad_input_size_is_one_line_error(tmp_path):
                               str(tmp_path / "o"), "--input-size", "256"])  # fmt: skip
     assert res.exit_code == 1 and "--input-size: expected WxH" in res.output
     assert "Traceback" not in res.output
+    res = runner.invoke(app, ["train-detector", "--data", str(tmp_path), "--out",
+                              str(tmp_path / "o"), "--init", str(tmp_path), "--widths", "8,8,8,8"])  # fmt: skip
+    assert res.exit_code == 1 and "--init takes the checkpoint's network" in res.output
 
 
 @pytest.mark.parametrize(

@@ -61,6 +61,8 @@ def train_detector_cmd(
     from icarus_vision.gate_detect.cnn.model import ModelConfig
     from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
 
+    if init is not None and (widths is not None or head_width is not None):
+        raise ValueError("--init takes the checkpoint's network: drop --widths/--head-width")
     model = ModelConfig()
     if widths is not None:
         model = replace(model, widths=parse_widths(widths))

@@ -46,15 +46,15 @@ def train_refiner_cmd(
         1.0,
         min=0.1,
         max=1.0,
-        help="The corner network reads the frames of the training candidates at this fraction "
-        "of the camera's size (0.8: 256x192, as the shipped detector reads them).",
+        help="A new run's training candidates: the corner network reads their frames at this "
+        "fraction of the camera's size (0.8: 256x192, as the shipped detector reads them).",
     ),
     candidate_iou: float = typer.Option(
         0.5,
         min=0.01,
         max=1.0,
-        help="Training candidates overlapping a better one by more than this are dropped "
-        "(0.85: as the shipped detector does).",
+        help="A new run's training candidates overlapping a better one by more than this are "
+        "dropped (0.85: as the shipped detector does).",
     ),
 ) -> None:
     """Train the refiner: it rectifies each of the first stage's candidate gates into a small
