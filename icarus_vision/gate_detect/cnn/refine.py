@@ -70,7 +70,8 @@ class RefineConfig:
     over union) are dropped before the refiner reads them (the refiner's own output is
     de-duplicated at the decoding's ``nms_iou``). Looser than that, gates seen through a gate of
     nearly the same apparent size each keep their candidate. (Training reads the candidates of
-    ``refine_train.CANDIDATES``, de-duplicated at 0.5; tuning and the detector, these.)"""
+    ``refine_train.CANDIDATES``, de-duplicated at ``RefineTrainConfig.candidate_iou``, 0.5 by
+    default; tuning and the detector, these.)"""
     max_skew: float = 0.0
     """A gate whose opening's mean side is at least ``skew_min_px`` is reported only if, seen
     by a nominal camera (:data:`NOMINAL_HFOV_DEG`), its opening is square in 3-D within a ratio

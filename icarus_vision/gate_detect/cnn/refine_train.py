@@ -396,7 +396,8 @@ class RefineTrainConfig:
     min_gate_px: float = 20.0
     """Smallest gate counted in the validation metrics, pixels."""
     tune: bool = True
-    """After training, choose the gate threshold and snap radius on the val split."""
+    """After training, choose on the val split what :func:`tune` chooses (threshold, snap
+    radius, squareness check, mirroring, passes, the corner network's input size)."""
     candidate_scale: float = 1.0
     """The corner network reads the frames whose candidates are trained and validated on at
     this fraction of the camera's size (as the detector does when tuned to a smaller input)."""

@@ -128,11 +128,12 @@ def train_detector(
     last_dir, best_dir = run_folders(out, resume, STATE)
     torch.manual_seed(cfg.seed)
     mcfg = model_config or ModelConfig()
-    model = CornerNet(mcfg)
+    start_from = None
     if init is not None and not resume:
         start_from, _, _ = load_checkpoint(init)
         mcfg = replace(start_from.cfg, input_size=mcfg.input_size)
-        model = CornerNet(mcfg)
+    model = CornerNet(mcfg)
+    if start_from is not None:
         model.load_state_dict(start_from.state_dict())
     if resume:
         model, _, meta = load_checkpoint(last_dir)
