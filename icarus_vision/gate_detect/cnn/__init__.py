@@ -28,7 +28,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
     onnx_bytes,
 )
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
-from icarus_vision.gate_detect.cnn.model import CornerNet, network_input
+from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
 from icarus_vision.gate_detect.cnn.refine import RefineNet, refine
 from icarus_vision.gate_detect.registry import register_detector
 
@@ -174,7 +174,7 @@ class CnnDetector(Detector):
             self.decode_cfg = replace(
                 decode_cfg, centre_threshold=floor, nms_iou=refiner.cfg.candidate_iou
             )
-            # channels-last like the patches it reads (refine.to_tensor makes no copy)
+            # channels-last: faster on a CPU core (it reads contiguous patches too)
             self.refiner = fuse_batchnorm(copy.deepcopy(refiner).eval())
             self.refiner = self.refiner.to(memory_format=torch.channels_last)
             p = refiner.cfg.patch
@@ -222,11 +222,8 @@ class CnnDetector(Detector):
         images = [validate_image(im) for im in images]
         if not images:
             return []
-        # (B, H, W, 3) viewed as (B, 3, H, W) is channels-last already: no copy
-        x = torch.from_numpy(
-            np.stack([network_input(im, self.input_size) for im in images])
-        ).permute(0, 3, 1, 2)
-        x = x.float().div_(255.0)
+        x = torch.from_numpy(to_float(np.stack([network_input(im, self.input_size)
+                                                for im in images])))  # fmt: skip
         net = self.model  # built (and traced) outside inference mode
         with torch.inference_mode():
             out = net(x.to(torch.bfloat16) if self.bf16 else x).float()

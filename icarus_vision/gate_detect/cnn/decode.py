@@ -12,6 +12,8 @@ Grid units throughout (cells of the output map); ``decode`` converts to camera p
 
 from __future__ import annotations
 
+import functools
+import itertools
 from dataclasses import dataclass
 
 import cv2
@@ -19,7 +21,7 @@ import numpy as np
 import torch
 
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
-from icarus_vision.gate_detect.metrics import mean_side
+from icarus_vision.gate_detect.metrics import mean_sides
 
 
 @dataclass(frozen=True)
@@ -66,73 +68,88 @@ MAX_PEAKS_PER_TYPE = 4
 _KERNEL = np.ones((3, 3), np.uint8)
 
 
-def _peaks(heat: np.ndarray, threshold: float) -> np.ndarray:
-    """(H, W) probabilities -> boolean local maxima (3x3) at or above ``threshold``."""
-    return (heat == cv2.dilate(heat, _KERNEL)) & (heat >= threshold)
+def peak_maps(heat: np.ndarray, thresholds: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Local maxima (3x3) of (K, H, W) probability maps at or above (K,) ``thresholds``: indices
+    (k, y, x), sorted by map, then row, then column.
+
+    The maps are dilated in one call, stacked with a row of -inf between them (so no maximum
+    sees across from the next map; the image border also counts as -inf)."""
+    k, h, w = heat.shape
+    stacked = np.full((k, h + 1, w), -np.inf, np.float32)
+    stacked[:, :h] = heat
+    dilated = cv2.dilate(stacked.reshape(k * (h + 1), w), _KERNEL).reshape(k, h + 1, w)
+    return np.nonzero((stacked == dilated) & (stacked >= thresholds[:, None, None]))
 
 
 def nested_gates(
-    centre: np.ndarray,
+    centres: np.ndarray,
     vectors: np.ndarray,
     peaks: tuple[np.ndarray, np.ndarray, np.ndarray],
     max_residual: float = DecodeConfig.nested_residual,
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Other gates around one centre peak: corner peaks shaped like the regressed gate.
+) -> list[list[tuple[np.ndarray, np.ndarray]]]:
+    """Other gates around centre peaks: corner peaks shaped like each regressed gate.
 
-    Every choice of one peak (or none) per corner type, with at least three peaks, is fitted to
-    the regressed shape by a similarity transform (scale, rotation, shift; least squares). A
-    choice is a gate when the fit is close (``max_residual``), barely rotated, at another
-    scale within ``NESTED_SCALE`` and centred near the peak; a missing corner comes from the fit.
+    For each centre, every choice of one peak (or none) per corner type, with at least three
+    peaks, is fitted to the regressed shape by a similarity transform (scale, rotation, shift;
+    least squares). A choice is a gate when the fit is close (``max_residual``), barely rotated,
+    at another scale within ``NESTED_SCALE`` and centred near the peak; a missing corner comes
+    from the fit. All centres are searched together (a few numpy calls per frame, not per centre).
 
     Args:
-        centre: (2,) centre cell.
-        vectors: (4, 2) regressed centre-to-corner vectors, cells.
+        centres: (P, 2) centre cells.
+        vectors: (P, 4, 2) regressed centre-to-corner vectors, cells.
         peaks: every corner peak: positions (N,) complex x + iy, cells; types (N,) int 0-3;
             scores (N,).
         max_residual: largest RMS misfit of the corners to the regressed shape, relative to
             the gate's size.
 
     Returns:
-        per gate ``(corners (4, 2) cells, scores (4,): 0 for a fitted corner)``.
+        per centre, its gates ``(corners (4, 2) cells, scores (4,): 0 for a fitted corner)``, in
+        the order of the choices (the first corner type's peak varying slowest).
     """
-    tmpl = vectors[:, 0] + 1j * vectors[:, 1]  # (4,) the regressed shape about the centre
-    side = mean_side(vectors)
     z, kind, val = peaks
-    if side < 1e-3 or len(z) < NESTED_MIN_CORNERS:
-        return []
-    c0 = centre[0] + 1j * centre[1]
+    found: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(len(centres))]
+    if not len(centres) or len(z) < NESTED_MIN_CORNERS:
+        return found
+    tmpl = vectors[..., 0] + 1j * vectors[..., 1]  # (P, 4) the regressed shapes about the centre
+    side = mean_sides(vectors)
+    c0 = centres[:, 0] + 1j * centres[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
-        w = (z - c0) / tmpl[kind]  # real: scale along the regressed corner's direction
+        w = (z - c0[:, None]) / tmpl[:, kind]  # (P, N) real: scale along the corner's direction
         tan = np.abs(w.imag) / w.real
-    sel = np.flatnonzero(
-        (w.real > NESTED_SCALE[0]) & (w.real < NESTED_SCALE[1]) & (tan < NESTED_SECTOR_TAN)
+    near = (w.real > NESTED_SCALE[0]) & (w.real < NESTED_SCALE[1]) & (tan < NESTED_SECTOR_TAN)
+    # per centre, its peaks by type (peaks not near it last), then nearest the direction first
+    k = np.where(near, kind, 4)
+    order = np.lexsort((tan, k), axis=-1)
+    rows = np.arange(len(centres))[:, None]
+    k = k[rows, order]
+    per_type = (k[:, :, None] == np.arange(5)).sum(axis=1)  # (P, 5)
+    start = np.cumsum(per_type, axis=1) - per_type
+    rank = np.arange(len(z)) - start[rows, k]  # position within its type
+    r, i = np.nonzero((k < 4) & (rank < MAX_PEAKS_PER_TYPE))
+    j, rank = order[r, i], rank[r, i] + 1
+    counts = np.minimum(per_type[:, :4], MAX_PEAKS_PER_TYPE)  # (P, 4) peaks tried per type
+    pts = np.full((len(centres), 4, MAX_PEAKS_PER_TYPE + 1), np.nan + 0j)  # column 0: "no peak"
+    vals = np.zeros((len(centres), 4, MAX_PEAKS_PER_TYPE + 1))
+    pts[r, kind[j], rank], vals[r, kind[j], rank] = z[j], val[j]
+    choices, peaks_in = _choices(tuple((counts.max(axis=0) + 1).tolist()))
+    usable = (side >= 1e-3) & (np.count_nonzero(counts, axis=1) >= NESTED_MIN_CORNERS)
+    keep = (
+        usable[:, None]
+        & (choices[None] <= counts[:, None]).all(axis=2)
+        & (peaks_in >= NESTED_MIN_CORNERS)
     )
-    sel = sel[np.lexsort((tan[sel], kind[sel]))]  # by type, then nearest the direction first
-    k = kind[sel]
-    rank = np.arange(len(sel)) - np.searchsorted(k, k)  # position within its type
-    sel, k, rank = (
-        sel[rank < MAX_PEAKS_PER_TYPE],
-        k[rank < MAX_PEAKS_PER_TYPE],
-        rank[rank < MAX_PEAKS_PER_TYPE],
-    )
-    counts = np.bincount(k, minlength=4)
-    if np.count_nonzero(counts) < NESTED_MIN_CORNERS:
-        return []
-    pts = np.full((4, MAX_PEAKS_PER_TYPE + 1), np.nan + 0j)  # column 0: "no peak"
-    vals = np.zeros((4, MAX_PEAKS_PER_TYPE + 1))
-    pts[k, rank + 1], vals[k, rank + 1] = z[sel], val[sel]
-    idx = np.indices(tuple(counts + 1)).reshape(4, -1).T  # (M, 4) choices
-    q = pts[np.arange(4), idx]  # (M, 4) complex peaks
-    have = ~np.isnan(q)
-    keep = have.sum(axis=1) >= NESTED_MIN_CORNERS
-    q, have, idx = q[keep], have[keep], idx[keep]
+    p, c = np.nonzero(keep)  # (centre, choice) pairs, by centre then choice
+    choice = choices[c]  # (K, 4)
+    q, have = pts[p[:, None], np.arange(4), choice], choice > 0  # (K, 4) complex peaks
+    tmpl, c0, side = tmpl[p], c0[p], side[p]
     n = have.sum(axis=1)
     p_mean = (tmpl * have).sum(axis=1) / n
     q_mean = np.where(have, q, 0).sum(axis=1) / n
     dp = np.where(have, tmpl - p_mean[:, None], 0)
     dq = np.where(have, q - q_mean[:, None], 0)
     a = (np.conj(dp) * dq).sum(axis=1) / (np.abs(dp) ** 2).sum(axis=1)  # scale * e^(i turn)
-    fit = a[:, None] * (tmpl - p_mean[:, None]) + q_mean[:, None]  # (M, 4)
+    fit = a[:, None] * (tmpl - p_mean[:, None]) + q_mean[:, None]  # (K, 4)
     scale = np.maximum(np.abs(a), 1e-9)
     resid = np.sqrt((np.where(have, np.abs(fit - q), 0) ** 2).sum(axis=1) / n) / (scale * side)
     offset = np.abs(fit.mean(axis=1) - c0) / (scale * side)
@@ -143,28 +160,41 @@ def nested_gates(
         & (scale < NESTED_SCALE[1])
         & (offset < NESTED_MAX_OFFSET)
     )
-    c = np.where(have[ok], q[ok], fit[ok])  # (K, 4) complex corners, fitted where missing
-    corners = np.stack([c.real, c.imag], axis=2)
-    return list(zip(corners, vals[np.arange(4), idx[ok]], strict=True))
+    corners = np.where(have[ok], q[ok], fit[ok])  # (G, 4) complex corners, fitted where missing
+    corners = np.stack([corners.real, corners.imag], axis=2)
+    scores = vals[p[ok][:, None], np.arange(4), choice[ok]]
+    for i, g, s in zip(p[ok].tolist(), corners, scores, strict=True):
+        found[i].append((g, s))
+    return found
 
 
-def _snap(
-    g: np.ndarray, cand: list[tuple[np.ndarray, np.ndarray]], snap_radius: float
+@functools.cache
+def _choices(shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 4) every choice of a peak (1, 2, ...) or none (0) per corner type, below ``shape``
+    per type, in C order (the first type varying slowest); (M,) the peaks each chooses."""
+    choices = np.indices(shape).reshape(len(shape), -1).T
+    return choices, (choices > 0).sum(axis=1)
+
+
+def snap(
+    regressed: np.ndarray, cand: list[tuple[np.ndarray, np.ndarray]], snap_radius: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Move each corner of ``g`` (4, 2) to the nearest peak of its type within the snap radius.
+    """Move each corner of (N, 4, 2) regressed gates to the nearest peak of its type within the
+    snap radius (``snap_radius`` of the gate's mean side, at least 1.5 cells).
 
     Returns:
-        (corners (4, 2), scores (4,): the peak's score, 0 where nothing was near).
+        (corners (N, 4, 2), scores (N, 4): the peak's score, 0 where nothing was near).
     """
-    g = g.copy()
-    radius = max(1.5, snap_radius * mean_side(g))
-    scores = np.zeros(4)
+    g = regressed.copy()
+    radius = np.maximum(1.5, snap_radius * mean_sides(g))
+    scores = np.zeros(g.shape[:2])
+    rows = np.arange(len(g))
     for k, (pos, val) in enumerate(cand):
         if len(pos):
-            d = np.linalg.norm(pos - g[k], axis=1)
-            j = int(np.argmin(d))
-            if d[j] <= radius:
-                g[k], scores[k] = pos[j], val[j]
+            d = np.linalg.norm(pos[None] - g[:, k, None], axis=2)  # (N, M)
+            j = d.argmin(axis=1)
+            near = d[rows, j] <= radius
+            g[near, k], scores[near, k] = pos[j[near]], val[j[near]]
     return g, scores
 
 
@@ -186,41 +216,51 @@ def decode(
         corner type ``(positions (M, 2) pixels, scores (M,))``.
     """
     maps = np.ascontiguousarray(out.detach().numpy(), dtype=np.float32)
-    heat_np, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
-    cys, cxs = np.nonzero(_peaks(heat_np[0], cfg.centre_threshold))
-    order = np.argsort(-heat_np[0, cys, cxs])[: cfg.max_gates]
-    cand = []
-    for k in range(4):
-        ys, xs = np.nonzero(_peaks(heat_np[1 + k], cfg.corner_threshold))
-        pos = np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1)
-        cand.append((pos, heat_np[1 + k, ys, xs]))
-    peaks = (
-        np.concatenate([p[:, 0] + 1j * p[:, 1] for p, _ in cand]),
-        np.concatenate([np.full(len(p), k) for k, (p, _) in enumerate(cand)]),
-        np.concatenate([v for _, v in cand]),
-    )
-    found, primaries = [], []
-    for i in order:
-        centre = np.array([cxs[i], cys[i]], float)
-        vectors = VECTOR_SCALE * reg[2:, cys[i], cxs[i]].reshape(4, 2)
-        score = float(heat_np[0, cys[i], cxs[i]])
-        g, scores = _snap(centre + vectors, cand, cfg.snap_radius)
-        found.append((g, scores, score))
-        if any(quad_iou(g, p) > cfg.nms_iou for p in primaries):
-            continue  # a weaker peak of a gate already searched around
-        primaries.append(g)
-        nested = nested_gates(centre, vectors, peaks, cfg.nested_residual) if cfg.nested else ()
-        for g, scores in nested:
-            found.append((g, scores, score * float(scores.mean())))
+    heat, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
+    thresholds = np.array([cfg.centre_threshold] + [cfg.corner_threshold] * 4, np.float32)
+    ks, ys, xs = peak_maps(heat, thresholds)
+    ends = np.searchsorted(ks, np.arange(6))  # peaks of map k: ends[k]:ends[k + 1]
+    cys, cxs = ys[: ends[1]], xs[: ends[1]]
+    order = np.argsort(-heat[0, cys, cxs])[: cfg.max_gates]
+    ys, xs = ys[ends[1] :], xs[ends[1] :]
+    pos = np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1)
+    val = heat[ks[ends[1] :], ys, xs]
+    bounds = (ends[1:] - ends[1]).tolist()
+    cand = [(pos[a:b], val[a:b]) for a, b in itertools.pairwise(bounds)]
+    peaks = (pos[:, 0] + 1j * pos[:, 1], ks[ends[1] :] - 1, val)
+    cys, cxs = cys[order], cxs[order]
+    centres = np.stack([cxs, cys], axis=1).astype(float)
+    vectors = VECTOR_SCALE * reg[2:, cys, cxs].T.reshape(-1, 4, 2)
+    scores = heat[0, cys, cxs].tolist()
+    snapped, snapped_scores = snap(centres[:, None] + vectors, cand, cfg.snap_radius)
+    primary = []  # a weaker peak of a gate already searched around is not searched again
+    box = boxes(snapped)
+    for i, g in enumerate(snapped):
+        primary.append(not any(quad_iou(g, snapped[j]) > cfg.nms_iou for j in range(i)
+                               if primary[j] and not apart(box[i], box[j])))  # fmt: skip
+    nested_by_peak = None
+    if cfg.nested:
+        keep = np.array(primary, bool)
+        nested_by_peak = iter(
+            nested_gates(centres[keep], vectors[keep], peaks, cfg.nested_residual)
+        )
+    found = []
+    for g, s, score, is_primary in zip(snapped, snapped_scores, scores, primary, strict=True):
+        found.append((g, s, score))
+        if is_primary and nested_by_peak is not None:
+            found += [(g, s, score * float(s.mean())) for g, s in next(nested_by_peak)]
     found.sort(key=lambda f: -f[2])
-    gates = []
-    for g, scores, score in found:
-        if np.count_nonzero(scores) < cfg.min_snapped and score < cfg.sure_centre:
+    pixels = np.array([g for g, _, _ in found]).reshape(-1, 4, 2) * np.asarray(scale) - 0.5
+    box = boxes(pixels)
+    gates, kept = [], []
+    for i, (corners, (_, s, score)) in enumerate(zip(pixels, found, strict=True)):
+        if np.count_nonzero(s) < cfg.min_snapped and score < cfg.sure_centre:
             continue
-        corners = g * np.asarray(scale) - 0.5
-        if any(quad_iou(corners, c) > cfg.nms_iou for c, _, _ in gates):
+        if any(quad_iou(corners, pixels[j]) > cfg.nms_iou
+               for j in kept if not apart(box[i], box[j])):  # fmt: skip
             continue
-        gates.append((corners, scores, score))
+        gates.append((corners, s, score))
+        kept.append(i)
         if len(gates) == cfg.max_gates:
             break
     if with_peaks:
@@ -235,3 +275,16 @@ def quad_iou(a: np.ndarray, b: np.ndarray) -> float:
     inter, _ = cv2.intersectConvexConvex(ha, hb)
     union = cv2.contourArea(ha) + cv2.contourArea(hb) - inter
     return min(float(inter / union), 1.0) if union > 0 else 0.0
+
+
+def boxes(quads: np.ndarray) -> list[tuple[float, float, float, float]]:
+    """Bounding boxes (x0, y0, x1, y1) of (N, 4, 2) quadrilaterals, as Python floats (for
+    :func:`apart`)."""
+    q = np.asarray(quads, float).reshape(-1, 4, 2)
+    return [tuple(b) for b in np.concatenate([q.min(axis=1), q.max(axis=1)], axis=1).tolist()]
+
+
+def apart(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
+    """Whether two :func:`boxes` do not overlap: then so do their quadrilaterals, and
+    :func:`quad_iou` is 0 (checking this first saves most of its calls)."""
+    return a[2] < b[0] or b[2] < a[0] or a[3] < b[1] or b[3] < a[1]

@@ -83,6 +83,15 @@ def network_input(image: np.ndarray, input_size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(image, tuple(input_size), interpolation=cv2.INTER_AREA)
 
 
+def to_float(images: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """(B, H, W, 3) uint8 -> (B, 3, H, W) float32 in [0, 1], contiguous (what ONNX Runtime
+    reads; one pass, into ``out`` if given). The values are ``x.float() / 255`` in PyTorch."""
+    if out is None:
+        out = np.empty((images.shape[0], 3, *images.shape[1:3]), np.float32)
+    np.divide(images.transpose(0, 3, 1, 2), np.float32(255.0), out=out, dtype=np.float32)
+    return out
+
+
 def conv_bn_relu(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:
     """3x3 convolution (no bias), batch norm, ReLU."""
     return nn.Sequential(

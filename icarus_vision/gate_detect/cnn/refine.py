@@ -34,7 +34,7 @@ import torch
 from torch import nn
 
 from icarus_vision.gate_detect.base import FLIP_ORDER
-from icarus_vision.gate_detect.cnn.model import conv_bn_relu
+from icarus_vision.gate_detect.cnn.model import conv_bn_relu, to_float
 from icarus_vision.gate_detect.metrics import NEXT_CORNER, mean_sides
 
 
@@ -266,11 +266,24 @@ def usable(quads: np.ndarray, min_side_px: float = 4.0) -> np.ndarray:
         return np.isfinite(q).all(axis=(1, 2)) & (cross > 0).all(axis=1) & big
 
 
-def offsets_to_corners(h: np.ndarray, offsets: np.ndarray, cfg: RefineConfig) -> np.ndarray:
+def offsets_to_corners(
+    h: np.ndarray, offsets: np.ndarray, cfg: RefineConfig, mirrored: np.ndarray | None = None
+) -> np.ndarray:
     """Corrected corners in camera pixels: (N, 8) network offsets under (N, 3, 3) homographies
-    -> (N, 4, 2)."""
+    -> (N, 4, 2).
+
+    Args:
+        mirrored: also (N, 8) offsets read from each patch mirrored left to right (corner order
+            swapped: :func:`mirrored`); then the mean of both readings' corners, in the image.
+    """
     in_patch = square(cfg)[None] + offsets.reshape(-1, 4, 2) * cfg.side
-    return transform(np.linalg.inv(h), in_patch)
+    if mirrored is None:
+        return transform(np.linalg.inv(h), in_patch)
+    # mirroring the patch is x -> P - 1 - x (the square is symmetric: lo + hi = P - 1)
+    flip = (square(cfg)[None] + mirrored.reshape(-1, 4, 2) * cfg.side)[:, FLIP_ORDER]
+    flip[..., 0] = cfg.patch - 1 - flip[..., 0]
+    both = transform(np.linalg.inv(h), np.concatenate([in_patch, flip], axis=1))
+    return 0.5 * (both[:, :4] + both[:, 4:])
 
 
 def corners_to_offsets(h: np.ndarray, corners: np.ndarray, cfg: RefineConfig) -> np.ndarray:
@@ -279,8 +292,20 @@ def corners_to_offsets(h: np.ndarray, corners: np.ndarray, cfg: RefineConfig) ->
 
 
 def to_tensor(patches: np.ndarray) -> torch.Tensor:
-    """(N, P, P, 3) uint8 -> (N, 3, P, P) float32 in [0, 1]."""
+    """(N, P, P, 3) uint8 -> (N, 3, P, P) float32 in [0, 1] (channels-last memory: no copy)."""
     return torch.from_numpy(patches).permute(0, 3, 1, 2).float().div_(255.0)
+
+
+def network_patches(patches: np.ndarray, mirror: bool = False) -> torch.Tensor:
+    """(N, P, P, 3) uint8 -> (N, 3, P, P) float32 in [0, 1], contiguous (what ONNX Runtime
+    reads, in one pass); with ``mirror``, (2N, ...): the patches, then each mirrored left to
+    right. The values are :func:`to_tensor`'s."""
+    n, p = len(patches), patches.shape[1]
+    out = np.empty((2 * n if mirror else n, 3, p, p), np.float32)
+    to_float(patches, out[:n])
+    if mirror:
+        out[n:] = out[:n, :, :, ::-1]
+    return torch.from_numpy(out)
 
 
 def snap_to_peaks(
@@ -383,23 +408,22 @@ def read(
     """One reading of (N, 4, 2) usable candidates with (N, 3) first-stage scores: (N,) gate
     logits and (N, 4, 2) corrected corners, camera pixels (``cfg.mirror``: see :func:`verdicts`)."""
     n, size = len(quads), image.shape[1::-1]
-    seen = quads
     if cfg.mirror:
-        flipped, where = mirrored(quads, size[0])
-        seen = np.concatenate([quads, flipped])
+        where = mirrored(quads, size[0])[1]
         geom = geometry(np.concatenate([quads, where]), np.concatenate([scores, scores]), size, cfg)
     else:
         geom = geometry(quads, scores, size, cfg)
-    h = homographies(seen, cfg)
+    h = homographies(quads, cfg)
+    # The mirrored reading rectifies the candidate with its corner order swapped; as the square
+    # is symmetric, that patch is this one mirrored (within one grey level of interpolation):
+    # flipped here rather than warped again.
+    x = network_patches(extract(image, h, cfg), cfg.mirror)
     with torch.inference_mode():
-        x = to_tensor(extract(image, h, cfg)).to(dtype)
-        out = net(x, torch.from_numpy(geom).to(dtype)).float().numpy()
-    corners = offsets_to_corners(h, out[:, 1:], cfg)
-    logit = out[:n, 0]
-    if cfg.mirror:
-        logit = 0.5 * (logit + out[n:, 0])
-        corners = 0.5 * (corners[:n] + corners[n:][:, FLIP_ORDER])
-    return logit, corners
+        out = net(x.to(dtype), torch.from_numpy(geom).to(dtype)).float().numpy()
+    if not cfg.mirror:
+        return out[:, 0], offsets_to_corners(h, out[:, 1:], cfg)
+    corners = offsets_to_corners(h, out[:n, 1:], cfg, mirrored=out[n:, 1:])
+    return 0.5 * (out[:n, 0] + out[n:, 0]), corners
 
 
 def select(
