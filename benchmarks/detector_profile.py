@@ -41,7 +41,8 @@ from torch.utils.flop_counter import FlopCounterMode
 from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.decode import decode
-from icarus_vision.gate_detect.cnn.model import network_input
+from icarus_vision.gate_detect.cnn.model import network_input, to_float
+from icarus_vision.gate_detect.cnn.runtime import run_network
 from icarus_vision.gate_detect.evaluate import one_thread
 
 # the module (the package exports a function of the same name)
@@ -56,9 +57,9 @@ class _Timed:
     def __init__(self, net) -> None:
         self.net, self.seconds, self.calls, self.patches = net, 0.0, 0, 0
 
-    def __call__(self, *inputs):
+    def run(self, *inputs):
         t0 = time.perf_counter()
-        out = self.net(*inputs)
+        out = run_network(self.net, *inputs)
         self.seconds += time.perf_counter() - t0
         self.calls += 1
         self.patches += len(inputs[0])
@@ -74,9 +75,8 @@ def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed]:
         t0 = time.perf_counter()
         x = network_input(im, det.input_size)
         t1 = time.perf_counter()
-        xt = torch.from_numpy(x[None]).permute(0, 3, 1, 2).float().div_(255.0)
-        with torch.inference_mode():
-            out = net(xt.to(torch.bfloat16) if det.bf16 else xt).float()[0]
+        dtype = torch.bfloat16 if det.bf16 else torch.float32
+        out = run_network(net, to_float(x[None]), dtype=dtype)[0]
         t2 = time.perf_counter()
         h, w = im.shape[:2]
         gates, peaks = decode(

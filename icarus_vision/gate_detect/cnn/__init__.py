@@ -21,15 +21,11 @@ import torch
 from torch import nn
 
 from icarus_vision.gate_detect.base import Detector, GateDetection, validate_image
-from icarus_vision.gate_detect.cnn.checkpoint import (
-    SHIPPED,
-    load_checkpoint,
-    load_refiner,
-    onnx_bytes,
-)
+from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint, load_refiner
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
 from icarus_vision.gate_detect.cnn.refine import RefineNet, refine
+from icarus_vision.gate_detect.cnn.runtime import OnnxRuntimeNet, run_network
 from icarus_vision.gate_detect.registry import register_detector
 
 
@@ -62,36 +58,6 @@ def frozen_trace(model: nn.Module, example: torch.Tensor) -> nn.Module:
             return torch.jit.freeze(torch.jit.trace(model.eval(), example, check_trace=False))
     except Exception:  # noqa: BLE001 - any tracing failure: run the module as it is
         return model
-
-
-class OnnxRuntimeNet:
-    """A network exported to ONNX and run by ONNX Runtime on the CPU, called like the module it
-    came from: torch tensors in, one float32 torch tensor out.
-
-    Args:
-        module: the network (exported once, here, in eval mode).
-        example: example inputs; their first (batch) dimension may differ between calls.
-        threads: ONNX Runtime's intra-op threads (None: its default, every core).
-    """
-
-    def __init__(self, module: nn.Module, example: tuple[torch.Tensor, ...], threads: int | None):
-        import onnxruntime as ort
-
-        self._names = [f"input{i}" for i in range(len(example))]
-        model = onnx_bytes(
-            module, example, input_names=self._names, output_names=["output"],
-            dynamic_axes={n: {0: "n"} for n in [*self._names, "output"]},
-        )  # fmt: skip
-        opts = ort.SessionOptions()
-        if threads is not None:
-            opts.intra_op_num_threads = threads
-            opts.inter_op_num_threads = 1
-        self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
-
-    def __call__(self, *inputs: torch.Tensor) -> torch.Tensor:
-        feed = {n: np.ascontiguousarray(t.detach().float().numpy())
-                for n, t in zip(self._names, inputs, strict=True)}  # fmt: skip
-        return torch.from_numpy(self._session.run(None, feed)[0])
 
 
 BACKENDS = ("auto", "torch", "onnxruntime")
@@ -222,11 +188,9 @@ class CnnDetector(Detector):
         images = [validate_image(im) for im in images]
         if not images:
             return []
-        x = torch.from_numpy(to_float(np.stack([network_input(im, self.input_size)
-                                                for im in images])))  # fmt: skip
-        net = self.model  # built (and traced) outside inference mode
-        with torch.inference_mode():
-            out = net(x.to(torch.bfloat16) if self.bf16 else x).float()
+        x = to_float(np.stack([network_input(im, self.input_size) for im in images]))
+        dtype = torch.bfloat16 if self.bf16 else torch.float32
+        out = run_network(self.model, x, dtype=dtype)
         results = []
         for im, o in zip(images, out, strict=True):
             h, w = im.shape[:2]

@@ -177,29 +177,34 @@ def _choices(shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def snap(
-    regressed: np.ndarray, cand: list[tuple[np.ndarray, np.ndarray]], snap_radius: float
+    regressed: np.ndarray, peaks: tuple[np.ndarray, np.ndarray, np.ndarray], snap_radius: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Move each corner of (N, 4, 2) regressed gates to the nearest peak of its type within the
     snap radius (``snap_radius`` of the gate's mean side, at least 1.5 cells).
 
+    Args:
+        peaks: every corner peak: positions (M, 2) cells, types (M,) int 0-3, scores (M,).
+
     Returns:
         (corners (N, 4, 2), scores (N, 4): the peak's score, 0 where nothing was near).
     """
-    g = regressed.copy()
-    radius = np.maximum(1.5, snap_radius * mean_sides(g))
-    scores = np.zeros(g.shape[:2])
-    rows = np.arange(len(g))
-    for k, (pos, val) in enumerate(cand):
-        if len(pos):
-            d = np.linalg.norm(pos[None] - g[:, k, None], axis=2)  # (N, M)
-            j = d.argmin(axis=1)
-            near = d[rows, j] <= radius
-            g[near, k], scores[near, k] = pos[j[near]], val[j[near]]
-    return g, scores
+    pos, kind, val = peaks
+    if not len(pos) or not len(regressed):
+        return regressed.copy(), np.zeros(regressed.shape[:2])
+    radius = np.maximum(1.5, snap_radius * mean_sides(regressed))
+    d = np.sqrt(((pos - regressed[:, :, None]) ** 2).sum(axis=3))  # (N, 4, M)
+    d[:, kind[None] != np.arange(4)[:, None]] = np.inf  # peaks of another type
+    j = d.argmin(axis=2)
+    near = np.take_along_axis(d, j[..., None], axis=2)[..., 0] <= radius[:, None]
+    corners = np.where(near[..., None], pos[j], regressed)
+    return corners, np.where(near, val[j], 0.0)
 
 
 def decode(
-    out: torch.Tensor, cfg: DecodeConfig, scale: tuple[float, float], with_peaks: bool = False
+    out: np.ndarray | torch.Tensor,
+    cfg: DecodeConfig,
+    scale: tuple[float, float],
+    with_peaks: bool = False,
 ):
     """Gates from one image's network output.
 
@@ -215,7 +220,9 @@ def decode(
         score of its corners. With ``with_peaks``, a pair ``(gates, peaks)``, peaks being per
         corner type ``(positions (M, 2) pixels, scores (M,))``.
     """
-    maps = np.ascontiguousarray(out.detach().numpy(), dtype=np.float32)
+    if isinstance(out, torch.Tensor):
+        out = out.detach().numpy()
+    maps = np.ascontiguousarray(out, dtype=np.float32)
     heat, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
     thresholds = np.array([cfg.centre_threshold] + [cfg.corner_threshold] * 4, np.float32)
     ks, ys, xs = peak_maps(heat, thresholds)
@@ -227,12 +234,12 @@ def decode(
     val = heat[ks[ends[1] :], ys, xs]
     bounds = (ends[1:] - ends[1]).tolist()
     cand = [(pos[a:b], val[a:b]) for a, b in itertools.pairwise(bounds)]
-    peaks = (pos[:, 0] + 1j * pos[:, 1], ks[ends[1] :] - 1, val)
+    kind = ks[ends[1] :] - 1
     cys, cxs = cys[order], cxs[order]
     centres = np.stack([cxs, cys], axis=1).astype(float)
     vectors = VECTOR_SCALE * reg[2:, cys, cxs].T.reshape(-1, 4, 2)
     scores = heat[0, cys, cxs].tolist()
-    snapped, snapped_scores = snap(centres[:, None] + vectors, cand, cfg.snap_radius)
+    snapped, snapped_scores = snap(centres[:, None] + vectors, (pos, kind, val), cfg.snap_radius)
     primary = []  # a weaker peak of a gate already searched around is not searched again
     box = boxes(snapped)
     for i, g in enumerate(snapped):
@@ -242,7 +249,12 @@ def decode(
     if cfg.nested:
         keep = np.array(primary, bool)
         nested_by_peak = iter(
-            nested_gates(centres[keep], vectors[keep], peaks, cfg.nested_residual)
+            nested_gates(
+                centres[keep],
+                vectors[keep],
+                (pos[:, 0] + 1j * pos[:, 1], kind, val),
+                cfg.nested_residual,
+            )  # fmt: skip
         )
     found = []
     for g, s, score, is_primary in zip(snapped, snapped_scores, scores, primary, strict=True):

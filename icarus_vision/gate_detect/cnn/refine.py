@@ -26,6 +26,7 @@ Shapes: patches (B, 3, P, P) float in [0, 1]; network output (B, 9).
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import cv2
@@ -35,6 +36,7 @@ from torch import nn
 
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.model import conv_bn_relu, to_float
+from icarus_vision.gate_detect.cnn.runtime import run_network
 from icarus_vision.gate_detect.metrics import NEXT_CORNER, mean_sides
 
 
@@ -123,17 +125,20 @@ def squareness(quads: np.ndarray, image_size: tuple[int, int], hfov_deg: float) 
     spread, as the training data's fields of view vary).
     """
     w, h = image_size
-    f = 0.5 * w / np.tan(np.radians(hfov_deg) / 2.0)
+    f = 0.5 * w / math.tan(math.radians(hfov_deg) / 2.0)
     k_inv = np.array([[1.0 / f, 0.0, -(w - 1) / (2.0 * f)],
                       [0.0, 1.0 / f, -(h - 1) / (2.0 * f)], [0.0, 0.0, 1.0]])  # fmt: skip
-    unit = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
-    m = k_inv @ perspective(unit, quads)
-    r1, r2 = m[:, :, 0], m[:, :, 1]
-    n1, n2 = np.linalg.norm(r1, axis=1), np.linalg.norm(r2, axis=1)
+    r = k_inv @ perspective(_UNIT_SQUARE, quads)[:, :, :2]  # (N, 3, 2): r1, r2
+    gram = np.swapaxes(r, 1, 2) @ r  # (N, 2, 2): |r1|^2, r1 . r2; r1 . r2, |r2|^2
     with np.errstate(divide="ignore", invalid="ignore"):
-        aspect = np.clip(np.log(n1 / n2), -3.0, 3.0)
-        cos = np.clip((r1 * r2).sum(axis=1) / (n1 * n2), -1.0, 1.0)
-    return np.nan_to_num(np.stack([aspect, cos], axis=1))
+        aspect = np.clip(0.5 * np.log(gram[:, 0, 0] / gram[:, 1, 1]), -3.0, 3.0)
+        cos = np.clip(gram[:, 0, 1] / np.sqrt(gram[:, 0, 0] * gram[:, 1, 1]), -1.0, 1.0)
+    out = np.stack([aspect, cos], axis=1)
+    return np.where(np.isnan(out), 0.0, out)
+
+
+_UNIT_SQUARE = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+"""A unit square about the origin, corners TL, TR, BR, BL."""
 
 
 def geometry(
@@ -221,17 +226,22 @@ def homographies(quads: np.ndarray, cfg: RefineConfig) -> np.ndarray:
     return perspective(quads, square(cfg))
 
 
+def patch_to_image(quads: np.ndarray, cfg: RefineConfig) -> np.ndarray:
+    """(N, 3, 3) inverses of :func:`homographies`: from the patch back to camera pixels
+    (computed as such: cheaper than inverting them)."""
+    return perspective(square(cfg), quads)
+
+
 def perspective(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """(N, 3, 3) homographies taking (4, 2) ``src`` corners onto ``dst`` corners, either side
     (N, 4, 2) or one (4, 2) shared by all (OpenCV, in float32)."""
     src, dst = np.asarray(src, np.float32), np.asarray(dst, np.float32)
     n = len(src) if src.ndim == 3 else len(dst) if dst.ndim == 3 else 1
-    src, dst = np.broadcast_to(src, (n, 4, 2)), np.broadcast_to(dst, (n, 4, 2))
+    src = np.ascontiguousarray(np.broadcast_to(src, (n, 4, 2)))
+    dst = np.ascontiguousarray(np.broadcast_to(dst, (n, 4, 2)))
     out = np.empty((n, 3, 3))
     for i in range(n):
-        out[i] = cv2.getPerspectiveTransform(
-            np.ascontiguousarray(src[i]), np.ascontiguousarray(dst[i])
-        )
+        out[i] = cv2.getPerspectiveTransform(src[i], dst[i])
     return out
 
 
@@ -267,7 +277,11 @@ def usable(quads: np.ndarray, min_side_px: float = 4.0) -> np.ndarray:
 
 
 def offsets_to_corners(
-    h: np.ndarray, offsets: np.ndarray, cfg: RefineConfig, mirrored: np.ndarray | None = None
+    h: np.ndarray | None,
+    offsets: np.ndarray,
+    cfg: RefineConfig,
+    mirrored: np.ndarray | None = None,
+    back: np.ndarray | None = None,
 ) -> np.ndarray:
     """Corrected corners in camera pixels: (N, 8) network offsets under (N, 3, 3) homographies
     -> (N, 4, 2).
@@ -275,14 +289,16 @@ def offsets_to_corners(
     Args:
         mirrored: also (N, 8) offsets read from each patch mirrored left to right (corner order
             swapped: :func:`mirrored`); then the mean of both readings' corners, in the image.
+        back: the homographies' inverses (patch to camera: :func:`patch_to_image`), if known.
     """
+    back = np.linalg.inv(h) if back is None else back
     in_patch = square(cfg)[None] + offsets.reshape(-1, 4, 2) * cfg.side
     if mirrored is None:
-        return transform(np.linalg.inv(h), in_patch)
+        return transform(back, in_patch)
     # mirroring the patch is x -> P - 1 - x (the square is symmetric: lo + hi = P - 1)
     flip = (square(cfg)[None] + mirrored.reshape(-1, 4, 2) * cfg.side)[:, FLIP_ORDER]
     flip[..., 0] = cfg.patch - 1 - flip[..., 0]
-    both = transform(np.linalg.inv(h), np.concatenate([in_patch, flip], axis=1))
+    both = transform(back, np.concatenate([in_patch, flip], axis=1))
     return 0.5 * (both[:, :4] + both[:, 4:])
 
 
@@ -296,7 +312,7 @@ def to_tensor(patches: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(patches).permute(0, 3, 1, 2).float().div_(255.0)
 
 
-def network_patches(patches: np.ndarray, mirror: bool = False) -> torch.Tensor:
+def network_patches(patches: np.ndarray, mirror: bool = False) -> np.ndarray:
     """(N, P, P, 3) uint8 -> (N, 3, P, P) float32 in [0, 1], contiguous (what ONNX Runtime
     reads, in one pass); with ``mirror``, (2N, ...): the patches, then each mirrored left to
     right. The values are :func:`to_tensor`'s."""
@@ -305,7 +321,7 @@ def network_patches(patches: np.ndarray, mirror: bool = False) -> torch.Tensor:
     to_float(patches, out[:n])
     if mirror:
         out[n:] = out[:n, :, :, ::-1]
-    return torch.from_numpy(out)
+    return out
 
 
 def snap_to_peaks(
@@ -417,12 +433,11 @@ def read(
     # The mirrored reading rectifies the candidate with its corner order swapped; as the square
     # is symmetric, that patch is this one mirrored (within one grey level of interpolation):
     # flipped here rather than warped again.
-    x = network_patches(extract(image, h, cfg), cfg.mirror)
-    with torch.inference_mode():
-        out = net(x.to(dtype), torch.from_numpy(geom).to(dtype)).float().numpy()
+    out = run_network(net, network_patches(extract(image, h, cfg), cfg.mirror), geom, dtype=dtype)
+    back = patch_to_image(quads, cfg)
     if not cfg.mirror:
-        return out[:, 0], offsets_to_corners(h, out[:, 1:], cfg)
-    corners = offsets_to_corners(h, out[:n, 1:], cfg, mirrored=out[n:, 1:])
+        return out[:, 0], offsets_to_corners(h, out[:, 1:], cfg, back=back)
+    corners = offsets_to_corners(h, out[:n, 1:], cfg, mirrored=out[n:, 1:], back=back)
     return 0.5 * (out[:n, 0] + out[n:, 0]), corners
 
 

@@ -1,0 +1,63 @@
+"""Running the detector's networks: ONNX Runtime, or PyTorch, numpy arrays in and out.
+
+Between the networks, the detector works in numpy on a frame's few candidates. Calling ONNX
+Runtime directly on numpy arrays spares each call a dozen small PyTorch conversions: a frame
+calls the networks two or three times, and each conversion right after a network is slow (the
+network's weights have just evicted the caches).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+
+class OnnxRuntimeNet:
+    """A network exported to ONNX and run by ONNX Runtime on the CPU: :meth:`run` takes and
+    returns numpy arrays; called, it works like the module it came from (torch tensors in, one
+    float32 torch tensor out).
+
+    Args:
+        module: the network (exported once, here, in eval mode).
+        example: example inputs; their first (batch) dimension may differ between calls.
+        threads: ONNX Runtime's intra-op threads (None: its default, every core).
+    """
+
+    def __init__(self, module: nn.Module, example: tuple[torch.Tensor, ...], threads: int | None):
+        import onnxruntime as ort
+
+        from icarus_vision.gate_detect.cnn.checkpoint import onnx_bytes
+
+        self._names = [f"input{i}" for i in range(len(example))]
+        model = onnx_bytes(
+            module, example, input_names=self._names, output_names=["output"],
+            dynamic_axes={n: {0: "n"} for n in [*self._names, "output"]},
+        )  # fmt: skip
+        opts = ort.SessionOptions()
+        if threads is not None:
+            opts.intra_op_num_threads = threads
+            opts.inter_op_num_threads = 1
+        self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+
+    def run(self, *inputs: np.ndarray) -> np.ndarray:
+        """float32 C-contiguous arrays in (no copy), the float32 output out."""
+        return self._session.run(None, dict(zip(self._names, inputs, strict=True)))[0]
+
+    def __call__(self, *inputs: torch.Tensor) -> torch.Tensor:
+        return torch.from_numpy(
+            self.run(*(np.ascontiguousarray(t.detach().float().numpy()) for t in inputs))
+        )
+
+
+def run_network(
+    net: nn.Module | OnnxRuntimeNet, *inputs: np.ndarray, dtype: torch.dtype = torch.float32
+) -> np.ndarray:
+    """The float32 output of ``net`` on float32 C-contiguous ``inputs``: a network with a
+    numpy ``run`` method (an :class:`OnnxRuntimeNet`) runs on them as they are; a PyTorch one
+    (a module or a traced one) reads them cast to ``dtype``, in inference mode."""
+    run = getattr(net, "run", None)
+    if run is not None:
+        return run(*inputs)
+    with torch.inference_mode():
+        return net(*(torch.from_numpy(x).to(dtype) for x in inputs)).float().numpy()
