@@ -20,8 +20,9 @@ per frame of each stage:
 
 Also counts the floating-point operations of each network per frame (PyTorch's
 ``FlopCounterMode``: a multiply-add is 2) and the rate the core sustained on them (GFLOP/s),
-which bounds what a smaller network could save. Prints one JSON object (also written to
-``--json``) with the machine's 1-minute load average.
+which bounds what a smaller network could save, and what a small numpy call costs right after a
+network call (``cold_call_us``: the work between the networks pays this on most calls). Prints
+one JSON object (also written to ``--json``) with the machine's 1-minute load average.
 """
 
 from __future__ import annotations
@@ -116,6 +117,24 @@ def network_flops(spec: str) -> dict:
     return out
 
 
+def cold_call_us(det, repeats: int = 300) -> dict:
+    """Median µs of one small numpy operation (a (2, 3, 3) sum) right after a refiner network
+    call, and of the same operation called again at once: what the first call after a network
+    costs once the network's weights have evicted the caches."""
+    p = det.refine_cfg.patch
+    x = np.zeros((4, 3, p, p), np.float32)
+    g = np.zeros((4, det.refine_cfg.num_geom), np.float32)
+    h = np.ones((2, 3, 3))
+    cold, warm = [], []
+    for _ in range(repeats):
+        run_network(det.refiner, x, g)
+        for times in (cold, warm):
+            t0 = time.perf_counter()
+            h.sum(axis=1)
+            times.append(time.perf_counter() - t0)
+    return {k: round(1e6 * float(np.median(v)), 1) for k, v in (("cold", cold), ("warm", warm))}
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--detector", default="cnn")
@@ -135,6 +154,7 @@ def main(argv: list[str] | None = None) -> dict:
         stage_times(det, images[:20])  # warm-up
         for _ in range(args.runs):
             runs.append(stage_times(det, images))
+        numpy_call = cold_call_us(det)
     per_stage = {k: round(float(np.median([r[0][k] for r in runs])), 3) for k in STAGES}
     refiner = runs[0][1]
     flops = network_flops(args.detector)
@@ -153,6 +173,7 @@ def main(argv: list[str] | None = None) -> dict:
         "refiner_patches_per_frame": round(patches, 2),
         "mflop_per_frame": {k: round(v, 1) for k, v in mflop.items()},
         "gflop_per_s": {k: round(v / per_stage[k], 1) for k, v in mflop.items()},
+        "numpy_call_us_after_network": numpy_call,
     }
     for k in (*STAGES, "total"):
         print(f"{k:16} {out['ms_per_frame'][k]:7.2f} ms")
@@ -160,6 +181,9 @@ def main(argv: list[str] | None = None) -> dict:
         print(
             f"{k:16} {out['mflop_per_frame'][k]:7.1f} MFLOP/frame, {out['gflop_per_s'][k]} GFLOP/s"
         )
+    print(
+        f"a numpy call right after a network: {numpy_call['cold']} µs ({numpy_call['warm']} µs again)"
+    )
     print(json.dumps(out))
     if args.json is not None:
         args.json.write_text(json.dumps(out, indent=2))

@@ -13,7 +13,16 @@ from icarus_vision.gate_detect.cnn import CnnDetector
 from icarus_vision.gate_detect.cnn.augment import make_augment
 from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
 from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, mirror
-from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, quad_iou
+from icarus_vision.gate_detect.cnn.decode import (
+    DecodeConfig,
+    apart,
+    boxes,
+    decode,
+    nested_gates,
+    peak_maps,
+    quad_iou,
+    snap,
+)
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.targets import detection_loss, encode_targets, focal_loss
 from icarus_vision.gate_detect.cnn.tune import choose
@@ -356,3 +365,58 @@ def test_fine_tuning_starts_from_a_checkpoint_at_another_input_size(tiny_dataset
         assert all(
             torch.equal(a, b) for a, b in zip(model.parameters(), start.parameters(), strict=True)
         )
+
+
+def test_peaks_are_found_per_map_with_no_map_seeing_the_next():
+    heat = np.zeros((3, 6, 5), np.float32)
+    heat[0, 5, 2] = 0.5  # last row of map 0 ...
+    heat[1, 0, 2] = 0.9  # ... next to the first row of map 1 in memory
+    heat[1, 3, 3] = 0.4
+    heat[2, 2, 1], heat[2, 2, 2] = 0.6, 0.7  # a plateau's slope is no peak
+    ks, ys, xs = peak_maps(heat, np.array([0.3, 0.3, 0.65], np.float32))
+    assert list(zip(ks.tolist(), ys.tolist(), xs.tolist(), strict=True)) == [
+        (0, 5, 2), (1, 0, 2), (1, 3, 3), (2, 2, 2)
+    ]  # fmt: skip
+
+
+def test_each_corner_snaps_to_the_nearest_peak_of_its_type_within_the_radius():
+    gates = np.stack([GATE_A, GATE_B])
+    pos = np.array([GATE_A[0] + (0.5, 0.0), GATE_A[0] + (0.2, 0.1), GATE_A[1] + (0.3, 0.0),
+                    GATE_B[2] + (3.0, 0.0), GATE_B[3] + (0.1, 0.1)])  # fmt: skip
+    kind = np.array([0, 0, 2, 2, 3])  # the third is near TR but is a BR peak
+    val = np.array([0.5, 0.6, 0.7, 0.8, 0.9])
+    corners, scores = snap(gates, (pos, kind, val), 0.3)  # GATE_B's radius: 1.9 cells
+    np.testing.assert_array_equal(corners[0, 0], pos[1])
+    np.testing.assert_array_equal(corners[0, 1:], GATE_A[1:])
+    np.testing.assert_array_equal(corners[1, :3], GATE_B[:3])
+    np.testing.assert_array_equal(corners[1, 3], pos[4])
+    np.testing.assert_array_equal(scores, [[0.6, 0, 0, 0], [0, 0, 0, 0.9]])
+    np.testing.assert_array_equal(snap(gates, (pos[:0], kind[:0], val[:0]), 0.3)[0], gates)
+
+
+def test_nested_gates_of_several_centres_are_those_of_each_alone():
+    far = (GATE_A - GATE_A.mean(axis=0)) * 0.4 + GATE_A.mean(axis=0) + (0.1, 0.05)
+    near_b = (GATE_B - GATE_B.mean(axis=0)) * 2.0 + GATE_B.mean(axis=0)
+    peaks = np.concatenate([far, near_b, GATE_A[:2] + 0.2])
+    z = peaks[:, 0] + 1j * peaks[:, 1]
+    kind = np.array([0, 1, 2, 3, 0, 1, 2, 3, 0, 1])
+    val = np.linspace(0.3, 0.9, len(z))
+    centres = np.stack([GATE_A.mean(axis=0), GATE_B.mean(axis=0), (5.0, 5.0)])
+    vectors = np.stack([GATE_A, GATE_B, GATE_B - GATE_B.mean(axis=0) + 5.0]) - centres[:, None]
+    together = nested_gates(centres, vectors, (z, kind, val), 0.08)
+    assert len(together[0]) and len(together[1]) and not together[2]
+    for i, found in enumerate(together):
+        alone = nested_gates(centres[i : i + 1], vectors[i : i + 1], (z, kind, val), 0.08)[0]
+        assert len(alone) == len(found)
+        for (c, s), (c1, s1) in zip(found, alone, strict=True):
+            np.testing.assert_array_equal(c, c1)
+            np.testing.assert_array_equal(s, s1)
+    assert min(np.abs(c - far).max() for c, _ in together[0]) < 1e-9
+    assert min(np.abs(c - near_b).max() for c, _ in together[1]) < 1e-9
+
+
+def test_boxes_apart_means_no_overlap():
+    quads = np.stack([GATE_A, GATE_B, GATE_A + (1.0, 1.0)])
+    b = boxes(quads)
+    assert apart(b[0], b[1]) and quad_iou(GATE_A, GATE_B) == 0.0
+    assert not apart(b[0], b[2]) and quad_iou(GATE_A, GATE_A + 1.0) > 0.0

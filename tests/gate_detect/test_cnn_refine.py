@@ -31,15 +31,20 @@ from icarus_vision.gate_detect.cnn.refine import (
     extract,
     geometry,
     homographies,
+    network_patches,
     offsets_to_corners,
+    patch_to_image,
     refine,
     select,
     snap_to_peaks,
     square,
     squareness,
+    to_tensor,
+    transform,
     usable,
     verdicts,
 )
+from icarus_vision.gate_detect.cnn.runtime import run_network
 from icarus_vision.gate_detect.metrics import mean_sides
 
 from .conftest import TINY_MODEL
@@ -474,3 +479,46 @@ def test_training_candidates_read_at_the_detectors_input(tiny_dataset, tmp_path,
             config=replace(cfg, candidate_scale=0.0),
             **kw,
         )
+
+
+def test_patch_to_image_inverts_the_homographies():
+    quads = np.stack([QUAD, QUAD * 0.5 + (20.0, 10.0)])
+    back = patch_to_image(quads, CFG)
+    np.testing.assert_allclose(
+        back / back[:, 2:, 2:], np.linalg.inv(homographies(quads, CFG)), rtol=1e-6, atol=1e-9
+    )
+    np.testing.assert_allclose(transform(back, square(CFG)[None].repeat(2, 0)), quads, atol=1e-3)
+
+
+def test_the_mirrored_reading_is_the_flipped_patch_read_back_through_the_flipped_corners():
+    img = np.random.default_rng(1).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    quads = np.stack([QUAD, QUAD * 0.6 + (30.0, 20.0)])
+    h = homographies(quads, CFG)
+    x = network_patches(extract(img, h, CFG), mirror=True)
+    assert x.shape == (4, 3, CFG.patch, CFG.patch) and x.flags.c_contiguous
+    np.testing.assert_array_equal(x[2:], x[:2, :, :, ::-1])
+    np.testing.assert_allclose(x[:2], to_tensor(extract(img, h, CFG)).numpy(), atol=0)
+    # as if the swapped corner order had been warped: within one grey level
+    swapped = extract(img, homographies(quads[:, FLIP_ORDER], CFG), CFG)
+    assert np.abs(x[2:] * 255.0 - to_tensor(swapped).numpy() * 255.0).max() <= 1.0 + 1e-4
+    # corners read from the mirrored patch go back through the swapped corners' homography
+    rng = np.random.default_rng(2)
+    off, off_m = rng.normal(0.0, 0.05, (2, 2, 8))
+    expected = 0.5 * (
+        offsets_to_corners(h, off, CFG)
+        + offsets_to_corners(homographies(quads[:, FLIP_ORDER], CFG), off_m, CFG)[:, FLIP_ORDER]
+    )
+    got = offsets_to_corners(h, off, CFG, mirrored=off_m, back=patch_to_image(quads, CFG))
+    np.testing.assert_allclose(got, expected, atol=1e-3)
+
+
+def test_networks_run_on_numpy_alike_in_pytorch_and_onnx_runtime():
+    net = _refiner().eval()
+    x = np.random.default_rng(0).random((3, 3, 40, 40), dtype=np.float32)
+    g = np.random.default_rng(1).random((3, CFG.num_geom), dtype=np.float32)
+    ort_net = OnnxRuntimeNet(net, (torch.from_numpy(x), torch.from_numpy(g)), threads=1)
+    a = run_network(net, x, g)
+    b = run_network(ort_net, x, g)
+    assert a.dtype == b.dtype == np.float32 and a.shape == b.shape == (3, 9)
+    np.testing.assert_allclose(a, b, atol=1e-4)
+    np.testing.assert_array_equal(ort_net(torch.from_numpy(x), torch.from_numpy(g)).numpy(), b)
