@@ -23,25 +23,27 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
 from icarus_vision.gate_detect.cnn.data import load_split
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet
-from icarus_vision.gate_detect.cnn.refine import (
-    RefineConfig,
-    RefineNet,
-    Verdicts,
+from icarus_vision.gate_detect.cnn.rectify import (
     corners_to_offsets,
     extract,
-    geometry,
     homographies,
     network_patches,
     offsets_to_corners,
     patch_to_image,
-    refine,
-    select,
-    snap_to_peaks,
     square,
     squareness,
     to_tensor,
     transform,
     usable,
+)
+from icarus_vision.gate_detect.cnn.refine import (
+    RefineConfig,
+    RefineNet,
+    Verdicts,
+    geometry,
+    refine,
+    select,
+    snap_to_peaks,
     verdicts,
 )
 from icarus_vision.gate_detect.cnn.runtime import run_network

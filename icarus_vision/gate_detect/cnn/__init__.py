@@ -2,7 +2,8 @@
 
 The network (``model.py``) predicts gate-centre and corner heatmaps at a quarter of the camera
 resolution; ``decode.py`` groups corners into candidate gates. An optional second stage
-(``refine.py``) rectifies each candidate into a small patch, verifies it and corrects its corners.
+(``refine.py``) rectifies each candidate into a small patch (``rectify.py``), verifies it and
+corrects its corners. ``runtime.py`` runs both networks (ONNX Runtime or PyTorch) on numpy arrays.
 ``train.py`` trains the first stage on gen-dataset output, ``refine_train.py`` the second;
 ``checkpoint.py`` saves both as safetensors + JSON. The shipped default lives in
 ``icarus_vision/models/detector/``.

@@ -226,42 +226,74 @@ def decode(
     heat, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
     thresholds = np.array([cfg.centre_threshold] + [cfg.corner_threshold] * 4, np.float32)
     ks, ys, xs = peak_maps(heat, thresholds)
-    ends = np.searchsorted(ks, np.arange(6))  # peaks of map k: ends[k]:ends[k + 1]
+    ends = np.searchsorted(ks, np.arange(6)).tolist()  # peaks of map k: ends[k]:ends[k + 1]
+    # centre peaks, best first, with the corners they regress
     cys, cxs = ys[: ends[1]], xs[: ends[1]]
     order = np.argsort(-heat[0, cys, cxs])[: cfg.max_gates]
-    ys, xs = ys[ends[1] :], xs[ends[1] :]
-    pos = np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1)
-    val = heat[ks[ends[1] :], ys, xs]
-    bounds = (ends[1:] - ends[1]).tolist()
-    cand = [(pos[a:b], val[a:b]) for a, b in itertools.pairwise(bounds)]
-    kind = ks[ends[1] :] - 1
     cys, cxs = cys[order], cxs[order]
     centres = np.stack([cxs, cys], axis=1).astype(float)
     vectors = VECTOR_SCALE * reg[2:, cys, cxs].T.reshape(-1, 4, 2)
-    scores = heat[0, cys, cxs].tolist()
-    snapped, snapped_scores = snap(centres[:, None] + vectors, (pos, kind, val), cfg.snap_radius)
-    primary = []  # a weaker peak of a gate already searched around is not searched again
+    # corner peaks, each at its regressed sub-cell position
+    ks, ys, xs = ks[ends[1] :], ys[ends[1] :], xs[ends[1] :]
+    peaks = (np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1), ks - 1, heat[ks, ys, xs])
+    found = _hypotheses(centres, vectors, heat[0, cys, cxs].tolist(), peaks, cfg)
+    gates = _best(found, scale, cfg)
+    if not with_peaks:
+        return gates
+    pos, _, val = peaks
+    per_type = itertools.pairwise([e - ends[1] for e in ends[1:]])
+    return gates, [(pos[a:b] * np.asarray(scale) - 0.5, val[a:b]) for a, b in per_type]
+
+
+def _hypotheses(
+    centres: np.ndarray,
+    vectors: np.ndarray,
+    scores: list[float],
+    peaks: tuple[np.ndarray, np.ndarray, np.ndarray],
+    cfg: DecodeConfig,
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Each centre peak's regressed gate (corners snapped), then, unless a better one overlaps it
+    (the same gate), the gates nested in or around it: ``(corners (4, 2) cells, corner scores
+    (4,), score)`` in that order.
+
+    Args:
+        centres: (P, 2) centre peaks, cells, best first.
+        vectors: (P, 4, 2) their regressed centre-to-corner vectors, cells.
+        scores: (P,) their heatmap values.
+        peaks: corner peaks: positions (M, 2) cells, types (M,) 0-3, scores (M,).
+    """
+    snapped, snapped_scores = snap(centres[:, None] + vectors, peaks, cfg.snap_radius)
+    # a weaker peak of a gate already searched around is not searched again
+    primary: list[bool] = []
     box = boxes(snapped)
     for i, g in enumerate(snapped):
         primary.append(not any(quad_iou(g, snapped[j]) > cfg.nms_iou for j in range(i)
                                if primary[j] and not apart(box[i], box[j])))  # fmt: skip
-    nested_by_peak = None
+    nested = iter(())
     if cfg.nested:
+        pos, kind, val = peaks
         keep = np.array(primary, bool)
-        nested_by_peak = iter(
-            nested_gates(
-                centres[keep],
-                vectors[keep],
-                (pos[:, 0] + 1j * pos[:, 1], kind, val),
-                cfg.nested_residual,
-            )  # fmt: skip
+        z = pos[:, 0] + 1j * pos[:, 1]
+        nested = iter(
+            nested_gates(centres[keep], vectors[keep], (z, kind, val), cfg.nested_residual)
         )
     found = []
     for g, s, score, is_primary in zip(snapped, snapped_scores, scores, primary, strict=True):
         found.append((g, s, score))
-        if is_primary and nested_by_peak is not None:
-            found += [(g, s, score * float(s.mean())) for g, s in next(nested_by_peak)]
-    found.sort(key=lambda f: -f[2])
+        if is_primary and cfg.nested:
+            found += [(g, s, score * float(s.mean())) for g, s in next(nested)]
+    return found
+
+
+def _best(
+    found: list[tuple[np.ndarray, np.ndarray, float]],
+    scale: tuple[float, float],
+    cfg: DecodeConfig,
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The gates among hypotheses (:func:`_hypotheses`), in camera pixels: best score first,
+    confirmed by their corners (``min_snapped``) or sure (``sure_centre``), none overlapping a
+    better one by more than ``nms_iou``, at most ``max_gates``."""
+    found = sorted(found, key=lambda f: -f[2])
     pixels = np.array([g for g, _, _ in found]).reshape(-1, 4, 2) * np.asarray(scale) - 0.5
     box = boxes(pixels)
     gates, kept = [], []
@@ -275,8 +307,6 @@ def decode(
         kept.append(i)
         if len(gates) == cfg.max_gates:
             break
-    if with_peaks:
-        return gates, [(p * np.asarray(scale) - 0.5, v) for p, v in cand]
     return gates
 
 

@@ -27,19 +27,21 @@ from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.data import Split
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import network_input
+from icarus_vision.gate_detect.cnn.rectify import (
+    corners_to_offsets,
+    extract,
+    homographies,
+    mirrored,
+    to_tensor,
+    usable,
+)
 from icarus_vision.gate_detect.cnn.refine import (
     RefineConfig,
     RefineNet,
     Verdicts,
-    corners_to_offsets,
-    extract,
     geometry,
-    homographies,
-    mirrored,
     select,
     stage_scores,
-    to_tensor,
-    usable,
     verdicts,
 )
 from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
