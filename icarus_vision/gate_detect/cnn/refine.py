@@ -14,9 +14,9 @@ A tiny network (:class:`RefineNet`) reads the patch and returns
   the opening's side.
 
 The geometry of rectification lives in ``rectify.py``. The corrected corners go back to the
-camera image through the inverse homography; optionally each
-is then snapped to the first stage's nearest peak of its corner type within ``snap`` of the gate's
-side (on val, the refiner's own corners were the better ones, so the shipped detector does not).
+camera image through the inverse homography; optionally each is then snapped to the first stage's
+nearest peak of its corner type within ``snap`` of the gate's side (on val, the refiner's own
+corners were the better ones, so the shipped detector does not).
 
 Optionally (``RefineConfig.mirror``) each candidate is read a second time mirrored, and the two
 readings are averaged; and (``RefineConfig.passes``) read again where the last reading put its
