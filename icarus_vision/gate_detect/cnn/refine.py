@@ -286,11 +286,11 @@ def read(
     else:
         geom = geometry(quads, scores, size, cfg)
     h = homographies(quads, cfg)
+    back = patch_to_image(quads, cfg)  # before the network, while this code is in the caches
     # The mirrored reading rectifies the candidate with its corner order swapped; as the square
     # is symmetric, that patch is this one mirrored (within one grey level of interpolation):
     # flipped here rather than warped again.
     out = run_network(net, network_patches(extract(image, h, cfg), cfg.mirror), geom, dtype=dtype)
-    back = patch_to_image(quads, cfg)
     if not cfg.mirror:
         return out[:, 0], offsets_to_corners(h, out[:, 1:], cfg, back=back)
     corners = offsets_to_corners(h, out[:n, 1:], cfg, mirrored=out[n:, 1:], back=back)
