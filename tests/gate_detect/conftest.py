@@ -1,9 +1,12 @@
-"""A tiny generated dataset (160x120, 16 images) shared by the detector tests, and tiny models."""
+"""A tiny generated dataset (160x120, 16 images) shared by the detector tests, tiny models, and
+a synthetic gate frame."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 
 from icarus_vision.dataset import generate_dataset
@@ -14,6 +17,19 @@ TINY_MODEL = ModelConfig(
     input_size=(80, 60), image_size=(160, 120), widths=(8, 8, 16, 16), head_width=8, stem_width=0
 )
 """A very small network for the training tests (half-resolution input, output grid 40x30)."""
+
+QUAD = np.array([[100.0, 60.0], [190.0, 70.0], [185.0, 160.0], [95.0, 150.0]])
+"""A candidate gate's opening in a 320x240 frame, pixels, TL, TR, BR, BL."""
+
+
+def gate_image() -> np.ndarray:
+    """A 320x240 RGB frame: an orange gate on grey whose opening is QUAD."""
+    img = np.full((240, 320, 3), 110, np.uint8)
+    centre = QUAD.mean(axis=0)
+    outer = centre + 1.3 * (QUAD - centre)
+    cv2.fillPoly(img, [np.round(outer).astype(np.int32)], (255, 90, 0))
+    cv2.fillPoly(img, [np.round(QUAD).astype(np.int32)], (110, 110, 110))
+    return img
 
 
 def write_recipe(path: Path) -> Path:

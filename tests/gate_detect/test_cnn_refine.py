@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
-import cv2
 import numpy as np
 import pytest
 import torch
@@ -24,16 +23,7 @@ from icarus_vision.gate_detect.cnn.data import load_split
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet
 from icarus_vision.gate_detect.cnn.rectify import (
-    corners_to_offsets,
-    extract,
-    homographies,
-    network_patches,
-    offsets_to_corners,
-    patch_to_image,
-    square,
     squareness,
-    to_tensor,
-    transform,
     usable,
 )
 from icarus_vision.gate_detect.cnn.refine import (
@@ -46,88 +36,11 @@ from icarus_vision.gate_detect.cnn.refine import (
     snap_to_peaks,
     verdicts,
 )
-from icarus_vision.gate_detect.cnn.runtime import run_network
 from icarus_vision.gate_detect.metrics import mean_sides
 
-from .conftest import TINY_MODEL
+from .conftest import QUAD, TINY_MODEL, gate_image
 
 CFG = RefineConfig(patch=40, margin=8)
-QUAD = np.array([[100.0, 60.0], [190.0, 70.0], [185.0, 160.0], [95.0, 150.0]])
-
-
-def _gate_image() -> np.ndarray:
-    """An orange frame on grey whose opening is QUAD."""
-    img = np.full((240, 320, 3), 110, np.uint8)
-    centre = QUAD.mean(axis=0)
-    outer = centre + 1.3 * (QUAD - centre)
-    cv2.fillPoly(img, [np.round(outer).astype(np.int32)], (255, 90, 0))
-    cv2.fillPoly(img, [np.round(QUAD).astype(np.int32)], (110, 110, 110))
-    return img
-
-
-def test_homography_puts_the_candidate_on_the_square_and_back():
-    h = homographies(QUAD[None], CFG)
-    np.testing.assert_allclose(corners_to_offsets(h, QUAD[None], CFG), 0.0, atol=1e-9)
-    truth = QUAD + np.array([[3.0, -2.0], [0.0, 4.0], [-5.0, 1.0], [2.0, 2.0]])
-    off = corners_to_offsets(h, truth[None], CFG)
-    np.testing.assert_allclose(offsets_to_corners(h, off, CFG)[0], truth, atol=1e-6)
-
-
-def test_patch_shows_the_opening_on_the_square_and_the_frame_around_it():
-    patch = extract(_gate_image(), homographies(QUAD[None], CFG), CFG)[0]
-    lo, hi = square(CFG)[0, 0], square(CFG)[2, 0]
-    inside = patch[int(lo) + 3 : int(hi) - 2, int(lo) + 3 : int(hi) - 2]
-    assert (inside == 110).all()
-    mid = CFG.patch // 2
-    for y, x in [(int(lo) - 2, mid), (int(hi) + 3, mid), (mid, int(lo) - 2), (mid, int(hi) + 3)]:
-        assert tuple(patch[y, x]) == (255, 90, 0), (y, x)
-
-
-def test_corner_order_swapped_gives_the_mirrored_patch():
-    img = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
-    a = extract(img, homographies(QUAD[None], CFG), CFG)[0].astype(int)
-    b = extract(img, homographies(QUAD[None][:, FLIP_ORDER], CFG), CFG)[0].astype(int)
-    assert np.abs(a[:, ::-1] - b).max() <= 1
-
-
-def test_squareness_tells_a_square_from_a_rectangle_in_any_view():
-    from icarus_vision.render.camera import intrinsics
-
-    k = intrinsics(320, 240, 95.0)
-    rng = np.random.default_rng(0)
-
-    def seen(width: float, height: float) -> np.ndarray:
-        """Corners of a width x height frame 4 m ahead, turned at random, in the image."""
-        local = np.array([[-1, 1, 0], [1, 1, 0], [1, -1, 0], [-1, -1, 0]]) * [
-            width / 2,
-            height / 2,
-            0,
-        ]
-        out = []
-        for _ in range(20):
-            yaw, pitch, roll = rng.uniform(-0.9, 0.9), rng.uniform(-0.5, 0.5), rng.uniform(-1, 1)
-            rz = np.array(
-                [[np.cos(roll), -np.sin(roll), 0], [np.sin(roll), np.cos(roll), 0], [0, 0, 1]]
-            )
-            ry = np.array(
-                [[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]]
-            )
-            rx = np.array(
-                [[1, 0, 0], [0, np.cos(pitch), -np.sin(pitch)], [0, np.sin(pitch), np.cos(pitch)]]
-            )
-            pts = local * [1, -1, 1] @ (rz @ ry @ rx).T + [0.3, -0.2, 4.0]
-            uv = pts @ k.T
-            out.append(uv[:, :2] / uv[:, 2:])
-        return np.array(out)
-
-    sq = squareness(seen(1.0, 1.0), (320, 240), 95.0)
-    np.testing.assert_allclose(sq, 0.0, atol=1e-4)  # a square, under the nominal camera
-    tall = squareness(seen(1.0, 1.6), (320, 240), 95.0)
-    np.testing.assert_allclose(np.abs(tall[:, 0]), np.log(1.6), atol=1e-4)
-    np.testing.assert_allclose(tall[:, 1], 0.0, atol=1e-4)
-    # under another camera a square is still close to one
-    wide = squareness(seen(1.0, 1.0), (320, 240), 105.0)
-    assert np.abs(wide).max() < 0.25
 
 
 def test_the_squareness_inputs_widen_the_refiners_input():
@@ -140,11 +53,6 @@ def test_the_squareness_inputs_widen_the_refiners_input():
     with torch.no_grad():
         assert net(torch.rand(2, 3, 40, 40), torch.from_numpy(geom)).shape == (2, 9)
     assert RefineConfig.from_dict(cfg.to_dict()) == cfg
-
-
-def test_usable_refuses_degenerate_candidates():
-    bad = [QUAD[[1, 0, 3, 2]], QUAD[[0, 2, 1, 3]], QUAD * 0.01 + 5, np.full((4, 2), np.nan)]
-    assert usable(np.array([QUAD, *bad])).tolist() == [True, False, False, False, False]
 
 
 def test_label_matches_near_candidates_only():
@@ -168,7 +76,7 @@ def test_snap_moves_a_corner_to_a_close_peak_of_its_type_only():
 def test_a_few_training_steps_lower_the_loss():
     """Jittered gates (to correct) and random quads (no gate) of one drawn image."""
     rng = np.random.default_rng(0)
-    img = _gate_image()[None]
+    img = gate_image()[None]
     n = 64
     q = QUAD + rng.normal(size=(n, 4, 2)) * 6.0
     # squares of 30 px somewhere on the grey background, above the gate
@@ -201,7 +109,7 @@ def _refiner(seed: int = 0) -> RefineNet:
 
 
 def test_refine_reports_corrected_gates_best_first_without_duplicates():
-    img = _gate_image()
+    img = gate_image()
     cands = [(QUAD, np.ones(4), 0.9), (QUAD + 1.0, np.ones(4), 0.8)]
     peaks = [(np.zeros((0, 2)), np.zeros(0))] * 4
     found = refine(_refiner(), img, cands, peaks, CFG)
@@ -214,7 +122,7 @@ def test_refine_reports_corrected_gates_best_first_without_duplicates():
 def test_mirrored_reading_is_mirror_symmetric():
     # Reading an image and its mirror image with the mirrored reading averaged in gives mirrored
     # answers: the two readings of one are the two readings of the other, swapped.
-    img = _gate_image()
+    img = gate_image()
     w = img.shape[1]
     cand = QUAD + np.array([[2.0, 1.0], [-1.0, 3.0], [0.0, -2.0], [1.5, 0.5]])
     mirrored = cand[FLIP_ORDER] * [-1.0, 1.0] + [w - 1.0, 0.0]
@@ -237,7 +145,7 @@ def test_mirrored_reading_is_mirror_symmetric():
 
 
 def test_a_second_pass_reads_again_where_the_first_put_the_corners():
-    img, net = _gate_image(), _refiner(5)
+    img, net = gate_image(), _refiner(5)
     cand = QUAD + np.array([[4.0, 2.0], [-3.0, 3.0], [0.0, -4.0], [2.5, 0.5]])
     once = verdicts(net, img, [(cand, np.ones(4), 0.9)], CFG)
     twice = verdicts(net, img, [(cand, np.ones(4), 0.9)], replace(CFG, passes=2))
@@ -323,13 +231,13 @@ def test_select_drops_big_openings_that_are_not_square_when_asked():
     checked = select(v, peaks, RefineConfig(max_skew=0.4, skew_min_px=30.0))
     assert [f[0][0, 0] for f in checked] == [36.0, 148.0]  # the big rectangle is dropped
     assert len(select(v, peaks, RefineConfig())) == 3
-    img = _gate_image()  # verdicts measure it
+    img = gate_image()  # verdicts measure it
     got = verdicts(_refiner(), img, [(QUAD, np.ones(4), 0.9)], CFG)
     np.testing.assert_allclose(got.skew, np.abs(squareness(got.corners, (320, 240), 95.0)[:, 0]))
 
 
 def test_verdicts_skip_candidates_under_the_floor():
-    img, net = _gate_image(), _refiner()
+    img, net = gate_image(), _refiner()
     cands = [(QUAD, np.ones(4), 0.9), (QUAD + 100.0, np.ones(4), 0.1)]
     assert len(verdicts(net, img, cands, CFG).prob) == 1  # floor: CFG.threshold
     assert len(verdicts(net, img, cands, CFG, floor=0.05).prob) == 2
@@ -354,7 +262,7 @@ def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     sess = ReferenceEvaluator(onnx.load(str(tmp_path / "r.onnx")))
     y = sess.run(None, {"patches": x.numpy(), "geometry": g.numpy()})[0]
     np.testing.assert_allclose(y, a.numpy(), atol=1e-4)
-    img = _gate_image()
+    img = gate_image()
     # frozen (batch norm folded, traced), eager and ONNX Runtime detectors agree
     settings = [{"frozen": True, "backend": "torch"}, {"frozen": False, "backend": "torch"},
                 {"backend": "onnxruntime"}]  # fmt: skip
@@ -481,46 +389,3 @@ def test_training_candidates_read_at_the_detectors_input(tiny_dataset, tmp_path,
             config=replace(cfg, candidate_scale=0.0),
             **kw,
         )
-
-
-def test_patch_to_image_inverts_the_homographies():
-    quads = np.stack([QUAD, QUAD * 0.5 + (20.0, 10.0)])
-    back = patch_to_image(quads, CFG)
-    np.testing.assert_allclose(
-        back / back[:, 2:, 2:], np.linalg.inv(homographies(quads, CFG)), rtol=1e-6, atol=1e-9
-    )
-    np.testing.assert_allclose(transform(back, square(CFG)[None].repeat(2, 0)), quads, atol=1e-3)
-
-
-def test_the_mirrored_reading_is_the_flipped_patch_read_back_through_the_flipped_corners():
-    img = np.random.default_rng(1).integers(0, 256, (240, 320, 3), dtype=np.uint8)
-    quads = np.stack([QUAD, QUAD * 0.6 + (30.0, 20.0)])
-    h = homographies(quads, CFG)
-    x = network_patches(extract(img, h, CFG), mirror=True)
-    assert x.shape == (4, 3, CFG.patch, CFG.patch) and x.flags.c_contiguous
-    np.testing.assert_array_equal(x[2:], x[:2, :, :, ::-1])
-    np.testing.assert_allclose(x[:2], to_tensor(extract(img, h, CFG)).numpy(), atol=0)
-    # as if the swapped corner order had been warped: within one grey level
-    swapped = extract(img, homographies(quads[:, FLIP_ORDER], CFG), CFG)
-    assert np.abs(x[2:] * 255.0 - to_tensor(swapped).numpy() * 255.0).max() <= 1.0 + 1e-4
-    # corners read from the mirrored patch go back through the swapped corners' homography
-    rng = np.random.default_rng(2)
-    off, off_m = rng.normal(0.0, 0.05, (2, 2, 8))
-    expected = 0.5 * (
-        offsets_to_corners(h, off, CFG)
-        + offsets_to_corners(homographies(quads[:, FLIP_ORDER], CFG), off_m, CFG)[:, FLIP_ORDER]
-    )
-    got = offsets_to_corners(h, off, CFG, mirrored=off_m, back=patch_to_image(quads, CFG))
-    np.testing.assert_allclose(got, expected, atol=1e-3)
-
-
-def test_networks_run_on_numpy_alike_in_pytorch_and_onnx_runtime():
-    net = _refiner().eval()
-    x = np.random.default_rng(0).random((3, 3, 40, 40), dtype=np.float32)
-    g = np.random.default_rng(1).random((3, CFG.num_geom), dtype=np.float32)
-    ort_net = OnnxRuntimeNet(net, (torch.from_numpy(x), torch.from_numpy(g)), threads=1)
-    a = run_network(net, x, g)
-    b = run_network(ort_net, x, g)
-    assert a.dtype == b.dtype == np.float32 and a.shape == b.shape == (3, 9)
-    np.testing.assert_allclose(a, b, atol=1e-4)
-    np.testing.assert_array_equal(ort_net(torch.from_numpy(x), torch.from_numpy(g)).numpy(), b)
