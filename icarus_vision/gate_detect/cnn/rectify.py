@@ -88,7 +88,7 @@ def usable(quads: np.ndarray, min_side_px: float = 4.0) -> np.ndarray:
 
 
 def offsets_to_corners(
-    h: np.ndarray | None,
+    h: np.ndarray,
     offsets: np.ndarray,
     cfg: RefineConfig,
     mirrored: np.ndarray | None = None,
@@ -100,7 +100,8 @@ def offsets_to_corners(
     Args:
         mirrored: also (N, 8) offsets read from each patch mirrored left to right (corner order
             swapped: :func:`mirrored`); then the mean of both readings' corners, in the image.
-        back: the homographies' inverses (patch to camera: :func:`patch_to_image`), if known.
+        back: the homographies' inverses (patch to camera: :func:`patch_to_image`), if known;
+            ``h`` is then not used.
     """
     back = np.linalg.inv(h) if back is None else back
     in_patch = square(cfg)[None] + offsets.reshape(-1, 4, 2) * cfg.side
