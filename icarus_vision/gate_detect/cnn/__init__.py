@@ -3,9 +3,10 @@
 The network (``model.py``) predicts gate-centre and corner heatmaps at a quarter of the camera
 resolution; ``decode.py`` groups corners into candidate gates. An optional second stage
 (``refine.py``) rectifies each candidate into a small patch (``rectify.py``), verifies it and
-corrects its corners. ``runtime.py`` runs both networks (ONNX Runtime or PyTorch) on numpy arrays.
-``train.py`` trains the first stage on gen-dataset output, ``refine_train.py`` the second;
-``checkpoint.py`` saves both as safetensors + JSON. The shipped default lives in
+corrects its corners; an optional third (``zoom.py``) reads each corner of a large gate again,
+zoomed in. ``runtime.py`` runs the networks (ONNX Runtime or PyTorch) on numpy arrays.
+``train.py`` trains the first stage on gen-dataset output, ``refine_train.py`` the second,
+``zoom_train.py`` the third; ``checkpoint.py`` saves them as safetensors + JSON. The shipped default lives in
 ``icarus_vision/models/detector/``.
 """
 
@@ -22,11 +23,17 @@ import torch
 from torch import nn
 
 from icarus_vision.gate_detect.base import Detector, GateDetection, validate_image
-from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint, load_refiner
+from icarus_vision.gate_detect.cnn.checkpoint import (
+    SHIPPED,
+    load_checkpoint,
+    load_refiner,
+    load_zoom,
+)
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
 from icarus_vision.gate_detect.cnn.refine import RefineNet, refine
 from icarus_vision.gate_detect.cnn.runtime import OnnxRuntimeNet, run_network
+from icarus_vision.gate_detect.cnn.zoom import ZoomNet, sharpen
 from icarus_vision.gate_detect.registry import register_detector
 
 
@@ -97,6 +104,9 @@ class CnnDetector(Detector):
             exported to ONNX when the detector is built, about a second, and run by ONNX
             Runtime in float32: about 1.4x faster than PyTorch on a CPU core without bfloat16;
             README) or "auto": PyTorch where it runs in bfloat16, else ONNX Runtime.
+        zoom: a trained third stage (:class:`ZoomNet`): it reads each corner of every reported
+            gate at least ``zoom.cfg.min_side_px`` across again, zoomed in, and moves it. It
+            runs as the refiner does.
     """
 
     name = "cnn"
@@ -110,6 +120,7 @@ class CnnDetector(Detector):
         frozen: bool = True,
         refiner: RefineNet | None = None,
         backend: str = "auto",
+        zoom: ZoomNet | None = None,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -151,6 +162,16 @@ class CnnDetector(Detector):
                 self.refiner = OnnxRuntimeNet(self.refiner, example, threads)
             elif frozen:
                 self.refiner = frozen_trace(self.refiner, example)
+        self.zoom_cfg = None if zoom is None else zoom.cfg
+        self.zoom = None if zoom is None else self._runner(zoom, zoom.cfg.patch)
+
+    def _runner(self, net: nn.Module, patch: int) -> nn.Module | OnnxRuntimeNet:
+        """A patch network (batch norm folded, eval mode) as the backend runs it."""
+        net = fuse_batchnorm(copy.deepcopy(net).eval()).to(memory_format=torch.channels_last)
+        example = (torch.zeros(2, patch, patch, 3).permute(0, 3, 1, 2),)
+        if self.backend == "onnxruntime":
+            return OnnxRuntimeNet(net, example, self.threads)
+        return frozen_trace(net, example[0]) if self.frozen else net
 
     @property
     def model(self) -> nn.Module | OnnxRuntimeNet:
@@ -182,7 +203,8 @@ class CnnDetector(Detector):
         constructor's ``threads``, ``bf16``, ``frozen``, ``backend``."""
         path = SHIPPED if path is None else path
         model, decode_cfg, meta = load_checkpoint(path)
-        return cls(model, decode_cfg, refiner=load_refiner(path, meta), **settings)
+        refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
+        return cls(model, decode_cfg, refiner=refiner, zoom=zoom, **settings)
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""
@@ -201,6 +223,9 @@ class CnnDetector(Detector):
             else:
                 cand, peaks = decode(o, self.decode_cfg, scale, with_peaks=True)
                 found = refine(self.refiner, im, cand, peaks, self.refine_cfg, self.nms_iou)
+            if self.zoom is not None and found:
+                moved = sharpen(self.zoom, im, np.stack([c for c, _, _ in found]), self.zoom_cfg)
+                found = [(q, s, score) for q, (_, s, score) in zip(moved, found, strict=True)]
             results.append([GateDetection(c, s, score) for c, s, score in found])
         return results
 

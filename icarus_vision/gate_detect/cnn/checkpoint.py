@@ -3,7 +3,8 @@
 A checkpoint is a folder holding the weights (safetensors: tensors only, nothing executable is
 unpickled) and a JSON file with the architecture, the decoding thresholds and how it was trained.
 A detector with a second stage also holds ``refiner.safetensors``, and its JSON a ``refine``
-section (:class:`~icarus_vision.gate_detect.cnn.refine.RefineConfig`). Every file is written
+section (:class:`~icarus_vision.gate_detect.cnn.refine.RefineConfig`); one with a third stage
+``zoom.safetensors`` and a ``zoom`` section (:class:`~icarus_vision.gate_detect.cnn.zoom.ZoomConfig`). Every file is written
 atomically. ``load_checkpoint`` accepts the folder or any of its files.
 """
 
@@ -24,10 +25,12 @@ from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
+from icarus_vision.gate_detect.cnn.zoom import ZoomConfig, ZoomNet
 
 FORMAT = "icarus-vision-detector/1"
 WEIGHTS, CONFIG, ONNX = "model.safetensors", "detector.json", "model.onnx"
 REFINER, REFINER_ONNX = "refiner.safetensors", "refiner.onnx"
+ZOOM = "zoom.safetensors"
 SHIPPED = Path(__file__).resolve().parents[2] / "models" / "detector"
 """The default detector shipped inside the package."""
 
@@ -45,9 +48,12 @@ def save_checkpoint(
     info: dict | None = None,
     refiner: RefineNet | None = None,
     refine_info: dict | None = None,
+    zoom: ZoomNet | None = None,
+    zoom_info: dict | None = None,
 ) -> Path:
-    """Write ``folder/model.safetensors`` and ``folder/detector.json`` (atomically), and with a
-    ``refiner`` (its config inside it) ``folder/refiner.safetensors``; returns folder."""
+    """Write ``folder/model.safetensors`` and ``folder/detector.json`` (atomically), with a
+    ``refiner`` (its config inside it) ``folder/refiner.safetensors`` and with a ``zoom`` stage
+    ``folder/zoom.safetensors``; returns folder."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     _save_weights(model, folder / WEIGHTS)
@@ -57,9 +63,16 @@ def save_checkpoint(
         meta["refine"] = refiner.cfg.to_dict()
     else:
         (folder / REFINER).unlink(missing_ok=True)
+    if zoom is not None:
+        _save_weights(zoom, folder / ZOOM)
+        meta["zoom"] = zoom.cfg.to_dict()
+    else:
+        (folder / ZOOM).unlink(missing_ok=True)
     meta["training"] = info or {}
     if refine_info is not None:
         meta["refine_training"] = refine_info
+    if zoom_info is not None:
+        meta["zoom_training"] = zoom_info
     atomic_write_json(folder / CONFIG, meta)
     return folder
 
@@ -132,6 +145,30 @@ def load_refiner(path: str | Path, meta: dict) -> RefineNet | None:
     return net.eval()
 
 
+def load_zoom(path: str | Path, meta: dict) -> ZoomNet | None:
+    """The zoom stage of the checkpoint at ``path`` (eval mode), None if it has none.
+
+    Args:
+        meta: the checkpoint's JSON metadata (from :func:`load_checkpoint`).
+
+    Raises:
+        FileNotFoundError / ValueError: a ``zoom`` section without its weights, or corrupt
+            weights or config (the file is named).
+    """
+    if "zoom" not in meta:
+        return None
+    folder = resolve(path)
+    w_path = folder / ZOOM
+    if not w_path.is_file():
+        raise FileNotFoundError(f"{w_path}: zoom-stage weights not found ({CONFIG} has one)")
+    try:
+        net = ZoomNet(ZoomConfig.from_dict(meta["zoom"]))
+    except (ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{folder / CONFIG}: not a valid zoom-stage config ({e})") from None
+    _load_weights(net, w_path, "zoom-stage")
+    return net.eval()
+
+
 def onnx_bytes(module: torch.nn.Module, inputs: tuple, **names) -> bytes:
     """``module`` (eval mode for the export) exported on example ``inputs`` to an ONNX model;
     ``names``: ``input_names``, ``output_names``, ``dynamic_axes``."""
@@ -168,4 +205,14 @@ def export_refiner_onnx(net: RefineNet, path: str | Path) -> Path:
     return _export(
         net, inputs, path, input_names=["patches", "geometry"], output_names=["refined"],
         dynamic_axes={"patches": {0: "n"}, "geometry": {0: "n"}, "refined": {0: "n"}},
+    )  # fmt: skip
+
+
+def export_zoom_onnx(net: ZoomNet, path: str | Path) -> Path:
+    """Export the zoom stage (input ``patches`` (N, 3, P, P) in [0, 1], output ``corners``
+    (N, 2); N dynamic) to ONNX."""
+    p = net.cfg.patch
+    return _export(
+        net, (torch.zeros(2, 3, p, p),), path, input_names=["patches"],
+        output_names=["corners"], dynamic_axes={"patches": {0: "n"}, "corners": {0: "n"}},
     )  # fmt: skip

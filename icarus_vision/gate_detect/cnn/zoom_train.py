@@ -1,0 +1,456 @@
+"""Training the zoom stage (``zoom.py``) on a trained detector's own detections.
+
+Examples: the detector (corner network and refiner) runs over the train splits; each detection
+matched to a counted labelled gate (eval-detector's rule) gives its four corner patches, cut where
+the detector put the gate, and ``copies`` more cut where its corners were moved further at random
+(``jitter`` of the side), so that the corrections are learnt over a wider spread of errors than
+the detector happens to make. The patches are cut once and kept in ``OUT/examples.npz`` (arrays
+only, read without unpickling), so a resumed run does not run the detector again. Training
+flips half of them about their diagonal (a mirrored corner: the target's two coordinates swap)
+and jitters brightness, contrast and noise. Every epoch is validated as eval-detector would
+score the detector with the stage on the val split; at the end the smallest gate it reads
+(``min_side_px``) is tuned there.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from icarus_vision.fileio import atomic_write_json
+from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
+from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
+from icarus_vision.gate_detect.cnn.zoom import (
+    ZoomConfig,
+    ZoomNet,
+    homographies,
+    rolled,
+    to_corners,
+    to_targets,
+    zoomable,
+)
+from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
+
+STATE = "zoom_state.pt"
+EXAMPLES = "examples.npz"
+ZOOM_ONNX = "zoom.onnx"
+MIN_SIDES = (20.0, 25.0, 30.0, 40.0, 60.0)
+"""``ZoomConfig.min_side_px`` values tried on val (ties go to the larger: less work)."""
+TIE = 0.001
+"""Val scores within this of the best count as ties."""
+
+
+@dataclass(frozen=True)
+class ZoomTrainConfig:
+    """Settings of one zoom-stage training run (recorded in ``detector.json``)."""
+
+    epochs: int = 6
+    """Passes over the examples."""
+    seed: int = 0
+    """Seed of the jitter, the initial weights, the shuffling and the augmentation."""
+    batch_size: int = 256
+    """Examples per optimisation step."""
+    lr: float = 2e-3
+    """Peak learning rate of AdamW (100 warm-up steps, then cosine decay to 0)."""
+    weight_decay: float = 1e-4
+    """AdamW weight decay."""
+    copies: int = 2
+    """Jittered copies of each detection."""
+    jitter: float = 0.02
+    """Standard deviation of their corners' noise, as a fraction of the gate's side."""
+    limit: int | None = None
+    """Use only the first ``limit`` images of each split (quick runs and tests)."""
+    min_gate_px: float = 20.0
+    """Smallest gate trained on and counted in the validation figures, pixels."""
+
+
+@dataclass
+class Examples:
+    """Corner patches and where their corners truly are.
+
+    Attributes:
+        patches: (M, P, P, 3) uint8 corner patches (:func:`~icarus_vision.gate_detect.cnn.zoom.homographies`).
+        targets: (M, 2) float32 true corner in each, half patches from its centre.
+    """
+
+    patches: np.ndarray
+    targets: np.ndarray
+
+
+@dataclass
+class ValFrames:
+    """The detector's output on the val split, for scoring it with the zoom stage.
+
+    Attributes:
+        detections: per image, (corners (4, 2), score) of each detection.
+        truth: per image, (corners, visibility, distance) of each labelled gate.
+        patches: (4K, P, P, 3) corner patches of the K detections at least ``min_gate_px``.
+        back: (4K, 3, 3) their patch-to-camera homographies.
+        owner: (K, 2) (image, detection) index of each of those detections.
+    """
+
+    detections: list[list[tuple[np.ndarray, float]]]
+    truth: list[list[tuple]]
+    patches: np.ndarray
+    back: np.ndarray
+    owner: np.ndarray
+
+
+def detections(detector, split: Split, progress: bool = False, what: str = "") -> list:
+    """Per image of ``split`` (loaded without pixels), the images and the detector's
+    (corners, score) list; an iterator, so that the images are not all kept."""
+    from rich.progress import track
+
+    items = enumerate(split.files)
+    if progress:
+        items = track(items, total=len(split.files), description=f"detecting {what}")
+    for i, path in items:
+        image = read_rgb(path)
+        found = [(d.corners.astype(float), float(d.score)) for d in detector.detect(image)]
+        yield i, image, found
+
+
+def _truth(split: Split, i: int) -> list[tuple]:
+    return [(g.corners, g.visibility, g.distance) for g in split.gates[i]]
+
+
+def training_examples(
+    detector,
+    split: Split,
+    cfg: ZoomConfig,
+    tcfg: ZoomTrainConfig,
+    rng: np.random.Generator,
+    progress: bool = False,
+) -> Examples:
+    """Corner patches of the detector's matched detections on ``split`` (module docstring)."""
+    patches, targets = [], []
+    for i, image, found in detections(detector, split, progress, "train images"):
+        g_rec, _ = evaluate_image(found, _truth(split, i), tcfg.min_gate_px)
+        for g in g_rec:
+            if not (g["matched"] and g["evaluable"] and g["side"] >= tcfg.min_gate_px):
+                continue
+            q = g["pred_corners"][None]
+            noise = rng.normal(size=(tcfg.copies, 4, 2)) * tcfg.jitter * g["side"]
+            quads = np.concatenate([q, q + noise])
+            h, _ = homographies(quads, cfg)
+            t = to_targets(h, rolled(np.repeat(g["corners"][None], len(quads), 0))[:, 0], cfg)
+            ok = np.isfinite(t).all(axis=1) & (np.abs(t) < 1.5).all(axis=1)
+            patches.append(extract(image, h[ok], cfg))
+            targets.append(t[ok].astype(np.float32))
+    p = cfg.patch
+    return Examples(
+        np.concatenate(patches) if patches else np.zeros((0, p, p, 3), np.uint8),
+        np.concatenate(targets) if targets else np.zeros((0, 2), np.float32),
+    )
+
+
+def val_frames(
+    detector, split: Split, cfg: ZoomConfig, min_gate_px: float, progress: bool = False
+) -> ValFrames:
+    """The detector's output on ``split`` and the corner patches of its detections."""
+    dets, truth, patches, back, owner = [], [], [], [], []
+    wide = replace(cfg, min_side_px=min_gate_px)
+    for i, image, found in detections(detector, split, progress, "val images"):
+        dets.append(found)
+        truth.append(_truth(split, i))
+        quads = np.array([c for c, _ in found], float).reshape(-1, 4, 2)
+        use = np.flatnonzero(zoomable(quads, wide))
+        if len(use):
+            h, b = homographies(quads[use], cfg)
+            patches.append(extract(image, h, cfg))
+            back.append(b)
+            owner += [(i, k) for k in use]
+    p = cfg.patch
+    return ValFrames(
+        dets, truth,
+        np.concatenate(patches) if patches else np.zeros((0, p, p, 3), np.uint8),
+        np.concatenate(back) if back else np.zeros((0, 3, 3)),
+        np.array(owner, int).reshape(-1, 2),
+    )  # fmt: skip
+
+
+def predict(net: ZoomNet, patches: np.ndarray, batch: int = 1024) -> np.ndarray:
+    """(M, 2) outputs of ``net`` (eval mode) on (M, P, P, 3) uint8 patches."""
+    net.eval()
+    out = [np.zeros((0, 2), np.float32)]
+    with torch.inference_mode():
+        for s in range(0, len(patches), batch):
+            out.append(net(to_tensor(patches[s : s + batch])).numpy())
+    return np.concatenate(out)
+
+
+def evaluate(net: ZoomNet, val: ValFrames, min_side_px: float, min_gate_px: float,
+             outputs: np.ndarray | None = None) -> dict:  # fmt: skip
+    """eval-detector figures of the detector on the val split with the zoom stage reading gates
+    at least ``min_side_px`` across (``outputs``: the network's on ``val.patches``, if known)."""
+    from icarus_vision.gate_detect.cnn.tune import score
+
+    if outputs is None:
+        outputs = predict(net, val.patches)
+    moved = to_corners(val.back, outputs.astype(np.float64), net.cfg).reshape(-1, 4, 2)
+    dets = [list(d) for d in val.detections]
+    for (i, k), q in zip(val.owner, moved, strict=True):
+        c, s = dets[i][k]
+        if mean_sides(c) >= min_side_px:
+            dets[i][k] = (q, s)
+    gts, preds = [], []
+    for d, t in zip(dets, val.truth, strict=True):
+        g, p = evaluate_image(d, t, min_gate_px)
+        gts += g
+        preds += p
+    m = summarize(gts, preds, min_gate_px)
+    return {**m, "score": round(score(m), 4), "min_side_px": min_side_px}
+
+
+def tune(net: ZoomNet, val: ValFrames, min_gate_px: float) -> dict:
+    """Val figures at the ``MIN_SIDES`` value with the best score (near ties: the largest)."""
+    outputs = predict(net, val.patches)
+    tried = [evaluate(net, val, s, min_gate_px, outputs) for s in MIN_SIDES]
+    best = max(m["score"] for m in tried)
+    return [m for m in tried if m["score"] >= best - TIE][-1]
+
+
+def augment(x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator):
+    """Half the patches flipped about their diagonal (targets swapped), brightness, contrast
+    and noise jitter; (N, 3, P, P) in [0, 1], (N, 2)."""
+    n = len(x)
+    flip = torch.from_numpy(rng.random(n) < 0.5)
+    x = torch.where(flip[:, None, None, None], x.transpose(2, 3), x)
+    y = torch.where(flip[:, None], y.flip(1), y)
+    gain = torch.from_numpy(rng.uniform(0.6, 1.4, (n, 1, 1, 1))).float()
+    bias = torch.from_numpy(rng.uniform(-0.15, 0.15, (n, 1, 1, 1))).float()
+    noise = torch.from_numpy(rng.normal(size=x.shape) * rng.uniform(0, 0.04, (n, 1, 1, 1)))
+    return ((x - 0.5) * gain + 0.5 + bias + noise.float()).clamp_(0, 1), y
+
+
+def train_epoch(net, opt, sched, ex: Examples, rng, batch_size: int, on_step=None) -> float:
+    """One shuffled pass over the examples; the mean L1 loss (half patches)."""
+    net.train()
+    order = rng.permutation(len(ex.targets))
+    total, n = 0.0, 0
+    for s in range(0, len(order), batch_size):
+        b = np.sort(order[s : s + batch_size])
+        x, y = augment(to_tensor(ex.patches[b]), torch.from_numpy(ex.targets[b]), rng)
+        loss = (net(x) - y).abs().sum(dim=1).mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        sched.step()
+        total, n = total + float(loss.detach()), n + 1
+        if on_step is not None:
+            on_step(total / n)
+    return total / max(n, 1)
+
+
+def _save_examples(path: Path, train: Examples) -> None:
+    tmp = path.with_name(f".{path.name}.tmp.npz")
+    np.savez(tmp, patches=train.patches, targets=train.targets)
+    os.replace(tmp, path)
+
+
+def _load_examples(path: Path) -> Examples:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return Examples(z["patches"], z["targets"])
+    except (OSError, ValueError, KeyError) as e:
+        raise ValueError(
+            f"{path}: unreadable examples file ({e}); delete it to collect again"
+        ) from None
+
+
+@dataclass(frozen=True)
+class ZoomResult:
+    """What :func:`train_zoom` produced."""
+
+    out_dir: Path
+    best_epoch: int
+    best_metrics: dict
+    history: list[dict]
+
+
+def train_zoom(
+    detector: str | Path,
+    data_dir: str | Path | list[str | Path],
+    out_dir: str | Path,
+    val_dir: str | Path | None = None,
+    epochs: int = 6,
+    seed: int = 0,
+    resume: bool = False,
+    config: ZoomTrainConfig | None = None,
+    zoom_config: ZoomConfig | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] | None = None,
+) -> ZoomResult:
+    """Train (or resume training) the zoom stage of a trained detector.
+
+    Output folder: ``best/`` and ``last/`` are complete detector checkpoints (the detector's
+    networks copied, plus ``zoom.safetensors``); ``last/`` also holds ``zoom_state.pt`` (what
+    ``resume`` reads); ``examples.npz`` (the training patches), ``zoom.onnx`` (best),
+    ``history.json`` and TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's
+    shuffle and augmentation depend on (seed, epoch) alone, so a resumed run trains as one never
+    interrupted.
+
+    Args:
+        detector: a trained detector with a refiner (checkpoint folder or file); its own zoom
+            stage, if any, is ignored.
+        data_dir: gen-dataset output whose ``train`` split is trained on; several: all of them.
+            Ideally images the detector was not trained on, so that its errors are those of
+            unseen images.
+        out_dir: output folder.
+        val_dir: the dataset whose ``val`` split validates and tunes (default: the first
+            ``data_dir``).
+        epochs: total epochs (a resumed run continues to this number).
+        seed: seed of jitter, weights, shuffling and augmentation.
+        resume: continue from ``OUT/last`` with the run's own settings.
+        config: further settings of a new run (``epochs`` and ``seed`` take precedence).
+        zoom_config: architecture of a new zoom stage.
+        progress: show rich progress bars.
+        log: called with one line per epoch.
+
+    Raises:
+        FileNotFoundError / ValueError: bad detector or dataset, a detector without a refiner,
+            or OUT/last present without ``resume`` (or missing with it).
+    """
+    from torch.utils.tensorboard import SummaryWriter
+
+    from icarus_vision.gate_detect.cnn import CnnDetector
+    from icarus_vision.gate_detect.cnn.checkpoint import (
+        export_zoom_onnx,
+        load_checkpoint,
+        load_refiner,
+        load_zoom,
+        save_checkpoint,
+    )
+    from icarus_vision.gate_detect.cnn.train import (
+        _progress_bar,
+        load_state,
+        run_folders,
+        save_state,
+    )
+
+    cfg = replace(config or ZoomTrainConfig(), epochs=epochs, seed=seed)
+    if cfg.epochs < 1:
+        raise ValueError(f"epochs must be >= 1, got {cfg.epochs}")
+    out = Path(out_dir)
+    last_dir, best_dir = run_folders(out, resume, STATE)
+    source = last_dir if resume else detector
+    corner_net, decode_cfg, meta = load_checkpoint(source)
+    refiner = load_refiner(source, meta)
+    if refiner is None:
+        raise ValueError(f"{detector}: the zoom stage needs a detector with a refiner")
+    torch.manual_seed(cfg.seed)
+    net = ZoomNet(zoom_config or ZoomConfig())
+    if resume:
+        net = load_zoom(last_dir, meta).train()
+        stored = meta.get("zoom_training", {}).get("config", {})
+        known = {f.name for f in fields(ZoomTrainConfig)}
+        cfg = replace(
+            ZoomTrainConfig(**{k: v for k, v in stored.items() if k in known}), epochs=epochs
+        )
+    dirs = list(data_dir) if isinstance(data_dir, list | tuple) else [data_dir]
+    if not dirs:
+        raise ValueError("no training data given")
+    val_dir = dirs[0] if val_dir is None else val_dir
+    # the detector folds batch norm into its own copy; the checkpoints keep the networks as they are
+    det = CnnDetector(copy.deepcopy(corner_net), decode_cfg, refiner=refiner)
+    out.mkdir(parents=True, exist_ok=True)
+    val = val_frames(det, load_split(val_dir, "val", None, cfg.limit), net.cfg, cfg.min_gate_px,
+                     progress)  # fmt: skip
+    if resume and (out / EXAMPLES).is_file():
+        train = _load_examples(out / EXAMPLES)
+    else:
+        rng = np.random.default_rng(cfg.seed)
+        parts = [training_examples(det, load_split(d, "train", None, cfg.limit), net.cfg, cfg,
+                                   rng, progress) for d in dirs]  # fmt: skip
+        train = Examples(np.concatenate([p.patches for p in parts]),
+                         np.concatenate([p.targets for p in parts]))  # fmt: skip
+        _save_examples(out / EXAMPLES, train)
+    if not len(train.targets):
+        raise ValueError(f"{dirs}: the detector matched no gate to train the zoom stage on")
+    if log is not None:
+        log(f"{len(train.targets)} corner patches to train on, {len(val.patches)} to validate")
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    steps_per_epoch = int(np.ceil(len(train.targets) / cfg.batch_size))
+    total = cfg.epochs * steps_per_epoch
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: float(min((s + 1) / 100, 0.5 * (1 + np.cos(np.pi * min(s / total, 1.0)))))
+    )
+    start, history, best = 0, [], (-1.0, -1, {})
+    if resume:
+        start, history, best, _ = load_state(last_dir / STATE, opt, sched)
+    writer = SummaryWriter(str(out / "tb"))
+    info = {"detector": str(detector), "data": [str(d) for d in dirs], "val": str(val_dir),
+            "config": asdict(cfg)}  # fmt: skip
+
+    def save(folder: Path, epoch: int, zoom: ZoomNet, extra: dict | None = None) -> None:
+        save_checkpoint(folder, corner_net, decode_cfg, meta.get("training", {}), refiner,
+                        meta.get("refine_training"), zoom, {**info, "epoch": epoch, **(extra or {})})  # fmt: skip
+
+    def save_last(epoch: int) -> None:
+        save(last_dir, epoch, net)
+        save_state(last_dir / STATE, opt, sched, epoch, history, best)
+
+    bar = _progress_bar() if progress else None
+    completed = start
+    try:
+        if bar is not None:
+            bar.start()
+        for epoch in range(start, cfg.epochs):
+            rng = np.random.default_rng([cfg.seed, epoch])
+            task = None
+            if bar is not None:
+                task = bar.add_task(f"epoch {epoch + 1}/{cfg.epochs}", total=steps_per_epoch,
+                                    loss=float("nan"))  # fmt: skip
+            t0 = time.perf_counter()
+
+            def step(loss: float, task=task) -> None:
+                if bar is not None:
+                    bar.update(task, advance=1, loss=loss)
+
+            loss = train_epoch(net, opt, sched, train, rng, cfg.batch_size, step)
+            metrics = evaluate(net, val, net.cfg.min_side_px, cfg.min_gate_px)
+            row = {"epoch": epoch + 1, "seconds": round(time.perf_counter() - t0, 1),
+                   "loss": loss, "val": metrics, "score": metrics["score"]}  # fmt: skip
+            history.append(row)
+            writer.add_scalar("zoom_loss/l1", loss, epoch + 1)
+            writer.add_scalar("zoom_val/score", metrics["score"], epoch + 1)
+            writer.add_scalar("zoom_val/pck5", metrics["pck"]["5px"] or 0.0, epoch + 1)
+            writer.flush()
+            if metrics["score"] > best[0]:
+                best = (metrics["score"], epoch + 1, metrics)
+                save(best_dir, epoch + 1, net, {"val": metrics})
+            save_last(epoch + 1)
+            completed = epoch + 1
+            atomic_write_json(out / "history.json", history)
+            if log is not None:
+                m = metrics
+                log(f"epoch {epoch + 1}: loss {loss:.4f}  val precision {m['precision']}  "
+                    f"recall {m['recall']}  median corner error "
+                    f"{m['corner_error_px']['median']} px  PCK@2px {m['pck']['2px']}  "
+                    f"PCK@5px {m['pck']['5px']}  ({row['seconds']} s)")  # fmt: skip
+    except KeyboardInterrupt:
+        save_last(completed)
+        raise
+    finally:
+        if bar is not None:
+            bar.stop()
+        writer.close()
+    _, _, best_meta = load_checkpoint(best_dir)
+    best_net = load_zoom(best_dir, best_meta)
+    metrics = tune(best_net, val, cfg.min_gate_px)
+    tuned = ZoomNet(replace(best_net.cfg, min_side_px=metrics["min_side_px"]))
+    tuned.load_state_dict(best_net.state_dict())
+    done = best_meta["zoom_training"]
+    save(best_dir, done["epoch"], tuned.eval(), {"val": metrics, "val_untuned": done.get("val")})
+    if log is not None:
+        log(f"tuned on val: zoom stage reads gates of at least {metrics['min_side_px']} px "
+            f"(score {metrics['score']})")  # fmt: skip
+    export_zoom_onnx(tuned, out / ZOOM_ONNX)
+    return ZoomResult(out, done["epoch"], metrics, history)

@@ -1,0 +1,239 @@
+"""The detector's third stage: corner patches zoomed in, moving corners, training and checkpoints."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.cnn import CnnDetector, OnnxRuntimeNet
+from icarus_vision.gate_detect.cnn import zoom_train as zt
+from icarus_vision.gate_detect.cnn.checkpoint import (
+    export_zoom_onnx,
+    load_checkpoint,
+    load_zoom,
+    save_checkpoint,
+)
+from icarus_vision.gate_detect.cnn.data import load_split
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig
+from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.rectify import extract, transform
+from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
+from icarus_vision.gate_detect.cnn.zoom import (
+    ZoomConfig,
+    ZoomNet,
+    homographies,
+    rolled,
+    sharpen,
+    square,
+    to_corners,
+    to_targets,
+)
+
+from .conftest import QUAD, TINY_MODEL, gate_image
+
+CFG = ZoomConfig(patch=24, widths=(4, 8, 8, 8), hidden=16)
+
+
+def _zoom(seed: int = 0, cfg: ZoomConfig = CFG) -> ZoomNet:
+    torch.manual_seed(seed)
+    return ZoomNet(cfg).eval()
+
+
+class Fixed(torch.nn.Module):
+    """A stand-in zoom network that always answers ``out``."""
+
+    def __init__(self, out) -> None:
+        super().__init__()
+        self.out = torch.tensor(out, dtype=torch.float32)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.out.expand(len(x), 2)
+
+
+def test_each_corner_lands_at_its_patch_centre_with_the_next_one_to_the_right():
+    h, back = homographies(QUAD[None], CFG)
+    assert h.shape == back.shape == (4, 3, 3)
+    c = CFG.patch / 2 - 0.5
+    for i in range(4):
+        moved = transform(h[i : i + 1], rolled(QUAD[None])[i : i + 1])[0]
+        np.testing.assert_allclose(moved, square(CFG), atol=1e-3)
+        np.testing.assert_allclose(moved[0], [c, c], atol=1e-3)
+    np.testing.assert_allclose(to_targets(h, QUAD, CFG), 0.0, atol=1e-4)
+    pts = QUAD + np.array([[1.5, -2.0], [0.5, 3.0], [-2.5, 1.0], [0.0, -1.0]])
+    np.testing.assert_allclose(to_corners(back, to_targets(h, pts, CFG), CFG), pts, atol=1e-3)
+
+
+def test_every_corner_of_a_square_gate_looks_the_same():
+    """Turned by the gate's own homography, each corner patch shows the frame to the top left
+    and the opening to the bottom right."""
+    s = 60.0
+    quad = np.array([[130.0, 90.0], [130 + s, 90.0], [130 + s, 90 + s], [130.0, 90 + s]])
+    img = np.full((240, 320, 3), 110, np.uint8)
+    img[75:166, 115:206] = (255, 90, 0)
+    img[90:150, 130:190] = 110
+    h, _ = homographies(quad[None], CFG)
+    p = extract(img, h, CFG).astype(float)
+    for i in range(1, 4):
+        assert np.abs(p[i] - p[0]).mean() < 3.0
+    frame, opening = p[0, 2, 2], p[0, -3, -3]
+    assert frame[0] > 200 and opening[0] == pytest.approx(110, abs=2)
+
+
+def test_sharpen_moves_big_gates_corners_only():
+    img = gate_image()
+    small = QUAD * 0.1 + 10.0  # about 9 px across
+    quads = np.stack([QUAD, small])
+    same = sharpen(Fixed([0.0, 0.0]), img, quads, CFG)
+    np.testing.assert_allclose(same, quads, atol=1e-3)
+    moved = sharpen(Fixed([0.2, 0.0]), img, quads, CFG)
+    np.testing.assert_array_equal(moved[1], small)
+    # 0.2 half patches towards the next corner: 0.2 * extent of the side along the edge
+    step = moved[0] - QUAD
+    edge = np.roll(QUAD, -1, axis=0) - QUAD
+    along = (step * edge).sum(axis=1) / (edge * edge).sum(axis=1)
+    np.testing.assert_allclose(along, 0.2 * CFG.extent, atol=0.01)
+    assert sharpen(Fixed([0.2, 0.0]), img, np.zeros((0, 4, 2)), CFG).shape == (0, 4, 2)
+
+
+def test_a_few_training_steps_lower_the_loss():
+    img = gate_image()
+    rng = np.random.default_rng(0)
+    quads = QUAD + rng.normal(size=(64, 4, 2)) * 3.0
+    h, _ = homographies(quads, CFG)
+    truth = rolled(np.repeat(QUAD[None], len(quads), 0))[:, 0]
+    ex = zt.Examples(extract(img, h, CFG), to_targets(h, truth, CFG).astype(np.float32))
+    net = _zoom(cfg=replace(CFG, widths=(8, 16, 16, 16), hidden=32)).train()
+    opt = torch.optim.Adam(net.parameters(), 3e-3)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: 1.0)
+    first = zt.train_epoch(net, opt, sched, ex, np.random.default_rng(1), 16)
+    for e in range(12):
+        last = zt.train_epoch(net, opt, sched, ex, np.random.default_rng(e + 2), 16)
+    assert last < 0.7 * first
+
+
+def test_augment_flips_patch_and_target_together():
+    x = torch.zeros(64, 3, 8, 8)
+    x[:, :, 1, 5] = 1.0  # a bright pixel at row 1, column 5
+    y = torch.tensor([[0.5, -0.2]]).repeat(64, 1)
+    xa, ya = zt.augment(x, y, np.random.default_rng(0))
+    flipped = ya[:, 0] < 0
+    assert 10 < flipped.sum() < 54
+    assert torch.equal(ya[flipped], torch.tensor([[-0.2, 0.5]]).repeat(int(flipped.sum()), 1))
+    peak = xa.mean(dim=1).flatten(1).argmax(dim=1)
+    assert (peak[flipped] == 5 * 8 + 1).all() and (peak[~flipped] == 1 * 8 + 5).all()
+
+
+def test_save_load_onnx_and_every_backend_give_the_same_output(tmp_path):
+    onnx = pytest.importorskip("onnx")
+    from onnx.reference import ReferenceEvaluator
+
+    net = _zoom(3)
+    torch.manual_seed(1)
+    corner = CornerNet(TINY_MODEL).eval()
+    refiner = RefineNet(RefineConfig(patch=16, margin=4, threshold=0.0)).eval()
+    save_checkpoint(tmp_path / "ck", corner, DecodeConfig(), {}, refiner, None, net, {"n": 1})
+    _, _, meta = load_checkpoint(tmp_path / "ck")
+    loaded = load_zoom(tmp_path / "ck", meta)
+    assert loaded.cfg == CFG and meta["zoom_training"]["n"] == 1
+    x = torch.rand(5, 3, CFG.patch, CFG.patch)
+    with torch.no_grad():
+        a = net(x)
+        assert torch.equal(a, loaded(x))
+    export_zoom_onnx(loaded, tmp_path / "z.onnx")
+    y = ReferenceEvaluator(onnx.load(str(tmp_path / "z.onnx"))).run(None, {"patches": x.numpy()})
+    np.testing.assert_allclose(y[0], a.numpy(), atol=1e-4)
+    img = gate_image()
+    quads = np.stack([QUAD, QUAD + 40.0])
+    settings = [{"frozen": True, "backend": "torch"}, {"frozen": False, "backend": "torch"},
+                {"backend": "onnxruntime"}]  # fmt: skip
+    dets = [CnnDetector.load(tmp_path / "ck", **kw) for kw in settings]
+    assert isinstance(dets[2].zoom, OnnxRuntimeNet)
+    out = [sharpen(d.zoom, img, quads, d.zoom_cfg) for d in dets]
+    assert np.abs(out[0] - quads).max() > 0.01  # an untrained stage moves them
+    for o in out[1:]:
+        np.testing.assert_allclose(o, out[0], atol=1e-3)
+
+
+def test_missing_or_corrupt_zoom_weights_name_the_file(tmp_path):
+    refiner = RefineNet(RefineConfig(patch=16, margin=4))
+    save_checkpoint(tmp_path / "ck", CornerNet(TINY_MODEL), DecodeConfig(), {}, refiner, None,
+                    _zoom())  # fmt: skip
+    (tmp_path / "ck" / "zoom.safetensors").write_bytes(b"garbage")
+    with pytest.raises(ValueError, match="zoom.safetensors"):
+        make_detector(f"cnn:{tmp_path / 'ck'}")
+    (tmp_path / "ck" / "zoom.safetensors").unlink()
+    with pytest.raises(FileNotFoundError, match="zoom.safetensors"):
+        make_detector(f"cnn:{tmp_path / 'ck'}")
+
+
+def _labelled_detections(detector, split, progress=False, what=""):
+    """Stands in for the detector: each labelled gate found a little off (seeded)."""
+    from icarus_vision.gate_detect.cnn.data import read_rgb
+
+    rng = np.random.default_rng(0)
+    for i, path in enumerate(split.files):
+        found = [(g.corners + rng.normal(size=(4, 2)), 0.9) for g in split.gates[i]
+                 if np.isfinite(g.corners).all()]  # fmt: skip
+        yield i, read_rgb(path), found
+
+
+def _detector(tmp_path):
+    torch.manual_seed(0)
+    refiner = RefineNet(RefineConfig(patch=16, margin=4))
+    return save_checkpoint(tmp_path / "det", CornerNet(TINY_MODEL).eval(), DecodeConfig(), {},
+                           refiner)  # fmt: skip
+
+
+def test_train_zoom_saves_on_ctrl_c_resumes_exactly_and_tunes(tiny_dataset, tmp_path, monkeypatch):
+    from safetensors.torch import load_file
+
+    monkeypatch.setattr(zt, "detections", _labelled_detections)
+    det = _detector(tmp_path)
+    cfg = zt.ZoomTrainConfig(batch_size=32, min_gate_px=8.0)
+    kw = {"zoom_config": CFG, "progress": False, "config": cfg}
+
+    def interrupt(line: str) -> None:
+        if line.startswith("epoch"):
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        zt.train_zoom(det, tiny_dataset, tmp_path / "a", epochs=2, log=interrupt, **kw)
+    with pytest.raises(ValueError, match="--resume"):
+        zt.train_zoom(det, tiny_dataset, tmp_path / "a", epochs=2, **kw)
+    zt.train_zoom(det, tiny_dataset, tmp_path / "a", epochs=2, resume=True, progress=False)
+    zt.train_zoom(det, tiny_dataset, tmp_path / "b", epochs=2, **kw)
+    for kept in ("last", "best"):
+        a, b = (load_file(tmp_path / r / kept / "zoom.safetensors") for r in "ab")
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+        # the detector's own networks are copied unchanged
+        assert load_file(tmp_path / "a" / kept / "model.safetensors").keys() == \
+            load_file(det / "model.safetensors").keys()  # fmt: skip
+    meta = json.loads((tmp_path / "a" / "best" / "detector.json").read_text())
+    assert meta["zoom"]["min_side_px"] in zt.MIN_SIDES and meta["zoom"]["patch"] == CFG.patch
+    assert meta["zoom_training"]["config"]["batch_size"] == 32 and "refine" in meta
+    assert meta["zoom_training"]["val"]["score"] >= meta["zoom_training"]["val_untuned"]["score"]
+    assert (tmp_path / "a" / "zoom.onnx").is_file() and (tmp_path / "a" / "examples.npz").is_file()
+    assert [h["epoch"] for h in json.loads((tmp_path / "a" / "history.json").read_text())] == [1, 2]
+    assert make_detector(f"cnn:{tmp_path / 'a' / 'best'}").zoom is not None
+
+
+def test_training_examples_are_the_matched_gates_corners(tiny_dataset, monkeypatch):
+    monkeypatch.setattr(zt, "detections", _labelled_detections)
+    split = load_split(tiny_dataset, "train")
+    cfg = zt.ZoomTrainConfig(copies=1, min_gate_px=8.0)
+    counted = sum(len(found) for _, _, found in _labelled_detections(None, split))
+    ex = zt.training_examples(None, split, CFG, cfg, np.random.default_rng(0))
+    assert ex.patches.shape[1:] == (CFG.patch, CFG.patch, 3) and len(ex.patches) == len(ex.targets)
+    assert 0 < len(ex.targets) <= 2 * 4 * counted
+    assert np.isfinite(ex.targets).all() and (np.abs(ex.targets) < 1.5).all()
+
+
+def test_train_zoom_needs_a_refiner(tiny_dataset, tmp_path):
+    det = save_checkpoint(tmp_path / "det", CornerNet(TINY_MODEL), DecodeConfig())
+    with pytest.raises(ValueError, match="refiner"):
+        zt.train_zoom(det, tiny_dataset, tmp_path / "a", epochs=1, progress=False)
