@@ -16,7 +16,9 @@ per frame of each stage:
 - ``refiner_network``: the refiner's network calls, all readings of all candidates;
 - ``refiner_rest``: the rest of ``refine.verdicts`` (patch warping, geometry, corners back to
   the image, squareness);
-- ``select``: thresholds, squareness check and overlap test (``refine.select``).
+- ``select``: thresholds, squareness check and overlap test (``refine.select``);
+- ``zoom_network`` and ``zoom_rest``: the zoom stage's network call and the rest of
+  ``zoom.sharpen`` (corner patches, corners back to the image), if the detector has one.
 
 Also counts the floating-point operations of each network per frame (PyTorch's
 ``FlopCounterMode``: a multiply-add is 2) and the rate the core sustained on them (GFLOP/s),
@@ -44,12 +46,14 @@ from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.decode import decode
 from icarus_vision.gate_detect.cnn.model import network_input, to_float
 from icarus_vision.gate_detect.cnn.runtime import run_network
+from icarus_vision.gate_detect.cnn.zoom import sharpen
 from icarus_vision.gate_detect.evaluate import one_thread
 
 # the module (the package exports a function of the same name)
 refine = import_module("icarus_vision.gate_detect.cnn.refine")
 DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v2-test"
-STAGES = ("resize", "corner_network", "decode", "refiner_network", "refiner_rest", "select")
+STAGES = ("resize", "corner_network", "decode", "refiner_network", "refiner_rest", "select",
+          "zoom_network", "zoom_rest")  # fmt: skip
 
 
 class _Timed:
@@ -67,11 +71,13 @@ class _Timed:
         return out
 
 
-def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed]:
-    """Mean ms per frame of each stage over ``images``, and the timed refiner (its calls)."""
+def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed, _Timed]:
+    """Mean ms per frame of each stage over ``images``, and the timed refiner and zoom stage
+    (their calls)."""
     sums = dict.fromkeys(STAGES, 0.0)
     net = det.model
     refiner = _Timed(det.refiner)
+    zoom = _Timed(det.zoom)
     for im in images:
         t0 = time.perf_counter()
         x = network_input(im, det.input_size)
@@ -87,19 +93,29 @@ def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed]:
         before = refiner.seconds
         v = refine.verdicts(refiner, im, gates, det.refine_cfg)
         t4 = time.perf_counter()
-        refine.select(v, peaks, det.refine_cfg, det.nms_iou)
+        found = refine.select(v, peaks, det.refine_cfg, det.nms_iou)
         t5 = time.perf_counter()
-        net_s = refiner.seconds - before
-        for k, s in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, net_s, t4 - t3 - net_s, t5 - t4),
-                        strict=True):  # fmt: skip
+        zoom_before = zoom.seconds
+        if det.zoom is not None and found:
+            sharpen(zoom, im, np.stack([c for c, _, _ in found]), det.zoom_cfg)
+        t6 = time.perf_counter()
+        net_s, zoom_s = refiner.seconds - before, zoom.seconds - zoom_before
+        times = (t1 - t0, t2 - t1, t3 - t2, net_s, t4 - t3 - net_s, t5 - t4, zoom_s,
+                 t6 - t5 - zoom_s)  # fmt: skip
+        for k, s in zip(STAGES, times, strict=True):
             sums[k] += s
-    return {k: 1000.0 * v / len(images) for k, v in sums.items()}, refiner
+    return {k: 1000.0 * v / len(images) for k, v in sums.items()}, refiner, zoom
 
 
 def network_flops(spec: str) -> dict:
     """Floating-point operations of one corner-network frame and one refiner patch (the
     float32 modules of the checkpoint of ``spec``)."""
-    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED, load_checkpoint, load_refiner
+    from icarus_vision.gate_detect.cnn.checkpoint import (
+        SHIPPED,
+        load_checkpoint,
+        load_refiner,
+        load_zoom,
+    )
 
     path = spec.partition(":")[2] or SHIPPED
     model, _, meta = load_checkpoint(path)
@@ -114,6 +130,11 @@ def network_flops(spec: str) -> dict:
         with FlopCounterMode(display=False) as fc:
             refiner.eval()(torch.zeros(1, 3, p, p), torch.zeros(1, refiner.cfg.num_geom))
         out["refiner_patch"] = fc.get_total_flops()
+        zoom = load_zoom(path, meta)
+        if zoom is not None:
+            with FlopCounterMode(display=False) as fc:
+                zoom.eval()(torch.zeros(1, 3, zoom.cfg.patch, zoom.cfg.patch))
+            out["zoom_patch"] = fc.get_total_flops()
     return out
 
 
@@ -156,11 +177,13 @@ def main(argv: list[str] | None = None) -> dict:
             runs.append(stage_times(det, images))
         numpy_call = cold_call_us(det)
     per_stage = {k: round(float(np.median([r[0][k] for r in runs])), 3) for k in STAGES}
-    refiner = runs[0][1]
+    refiner, zoom = runs[0][1], runs[0][2]
     flops = network_flops(args.detector)
     patches = refiner.patches / len(images)
     mflop = {"corner_network": flops["corner_network"] / 1e6,
              "refiner_network": flops["refiner_patch"] * patches / 1e6}  # fmt: skip
+    if "zoom_patch" in flops and per_stage["zoom_network"] > 0:
+        mflop["zoom_network"] = flops["zoom_patch"] * zoom.patches / len(images) / 1e6
     out = {
         "detector": args.detector,
         "frames": len(images),
@@ -171,13 +194,14 @@ def main(argv: list[str] | None = None) -> dict:
         "ms_per_frame": per_stage | {"total": round(sum(per_stage.values()), 3)},
         "refiner_calls_per_frame": round(refiner.calls / len(images), 2),
         "refiner_patches_per_frame": round(patches, 2),
+        "zoom_patches_per_frame": round(zoom.patches / len(images), 2),
         "mflop_per_frame": {k: round(v, 1) for k, v in mflop.items()},
         "gflop_per_s": {k: round(v / per_stage[k], 1) for k, v in mflop.items()},
         "numpy_call_us_after_network": numpy_call,
     }
     for k in (*STAGES, "total"):
         print(f"{k:16} {out['ms_per_frame'][k]:7.2f} ms")
-    for k in ("corner_network", "refiner_network"):
+    for k in mflop:
         print(
             f"{k:16} {out['mflop_per_frame'][k]:7.1f} MFLOP/frame, {out['gflop_per_s'][k]} GFLOP/s"
         )

@@ -358,8 +358,9 @@ def train_zoom(
     if not dirs:
         raise ValueError("no training data given")
     val_dir = dirs[0] if val_dir is None else val_dir
-    # the detector folds batch norm into its own copy; the checkpoints keep the networks as they are
-    det = CnnDetector(copy.deepcopy(corner_net), decode_cfg, refiner=refiner)
+    # the detector folds batch norm into its own copy (the checkpoints keep the networks as they
+    # are); threads=None leaves PyTorch's thread count to the training
+    det = CnnDetector(copy.deepcopy(corner_net), decode_cfg, refiner=refiner, threads=None)
     out.mkdir(parents=True, exist_ok=True)
     val = val_frames(det, load_split(val_dir, "val", None, cfg.limit), net.cfg, cfg.min_gate_px,
                      progress)  # fmt: skip
