@@ -1,4 +1,4 @@
-"""`train-detector`, `train-refiner` and `eval-detector` on the command line: help, a run,
+"""`train-detector`, `train-refiner`, `train-zoom` and `eval-detector` on the command line: help, a run,
 one-line errors."""
 
 from __future__ import annotations
@@ -71,6 +71,12 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
         (
             ["train-refiner", "--data", "{data}", "--out", "{tmp}/o", "--widths", "8,16"],
             "expected 3 positive integers",
+        ),
+        (["train-zoom", "--data", "{data}", "--out", "{tmp}/o", "--resume"], "nothing to resume"),
+        (["train-zoom", "--data", "{data}", "--out", "{tmp}/o", "--patch", "20"], "multiple of 8"),
+        (
+            ["train-zoom", "--data", "{data}", "--out", "{tmp}/o", "--detector", "{tmp}/none"],
+            "none",
         ),
     ],
 )
