@@ -131,41 +131,28 @@ def load_refiner(path: str | Path, meta: dict) -> RefineNet | None:
         FileNotFoundError / ValueError: a ``refine`` section without its weights, or corrupt
             weights or config (the file is named).
     """
-    if "refine" not in meta:
-        return None
-    folder = resolve(path)
-    w_path = folder / REFINER
-    if not w_path.is_file():
-        raise FileNotFoundError(f"{w_path}: refiner weights not found ({CONFIG} has a refiner)")
-    try:
-        net = RefineNet(RefineConfig.from_dict(meta["refine"]))
-    except (ValueError, KeyError, TypeError) as e:
-        raise ValueError(f"{folder / CONFIG}: not a valid refiner config ({e})") from None
-    _load_weights(net, w_path, "refiner")
-    return net.eval()
+    return _load_stage(path, meta, "refine", REFINER, "refiner", RefineNet, RefineConfig)
 
 
 def load_zoom(path: str | Path, meta: dict) -> ZoomNet | None:
-    """The zoom stage of the checkpoint at ``path`` (eval mode), None if it has none.
+    """The zoom stage of the checkpoint at ``path`` (eval mode), None if it has none; as
+    :func:`load_refiner` (its ``zoom`` section and ``zoom.safetensors``)."""
+    return _load_stage(path, meta, "zoom", ZOOM, "zoom-stage", ZoomNet, ZoomConfig)
 
-    Args:
-        meta: the checkpoint's JSON metadata (from :func:`load_checkpoint`).
 
-    Raises:
-        FileNotFoundError / ValueError: a ``zoom`` section without its weights, or corrupt
-            weights or config (the file is named).
-    """
-    if "zoom" not in meta:
+def _load_stage(path, meta: dict, key: str, weights: str, what: str, net_cls, cfg_cls):
+    """A later stage's network from section ``key`` of ``meta`` and the file ``weights``."""
+    if key not in meta:
         return None
     folder = resolve(path)
-    w_path = folder / ZOOM
+    w_path = folder / weights
     if not w_path.is_file():
-        raise FileNotFoundError(f"{w_path}: zoom-stage weights not found ({CONFIG} has one)")
+        raise FileNotFoundError(f"{w_path}: {what} weights not found ({CONFIG} has a {what})")
     try:
-        net = ZoomNet(ZoomConfig.from_dict(meta["zoom"]))
+        net = net_cls(cfg_cls.from_dict(meta[key]))
     except (ValueError, KeyError, TypeError) as e:
-        raise ValueError(f"{folder / CONFIG}: not a valid zoom-stage config ({e})") from None
-    _load_weights(net, w_path, "zoom-stage")
+        raise ValueError(f"{folder / CONFIG}: not a valid {what} config ({e})") from None
+    _load_weights(net, w_path, what)
     return net.eval()
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 import copy
 import ctypes
 import itertools
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -22,7 +21,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.data import Split
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
@@ -44,6 +42,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     stage_scores,
     verdicts,
 )
+from icarus_vision.gate_detect.cnn.stage_train import run_epochs, warmup_cosine
 from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
 
 CANDIDATES = DecodeConfig(
@@ -480,12 +479,7 @@ def train_refiner(
         save_checkpoint,
     )
     from icarus_vision.gate_detect.cnn.data import load_split
-    from icarus_vision.gate_detect.cnn.train import (
-        _progress_bar,
-        load_state,
-        run_folders,
-        save_state,
-    )
+    from icarus_vision.gate_detect.cnn.train import load_state, run_folders, save_state
     from icarus_vision.gate_detect.cnn.tune import score as _score
 
     cfg = replace(config or RefineTrainConfig(), epochs=epochs, seed=seed)
@@ -535,16 +529,10 @@ def train_refiner(
     if not finished:
         n_jitter = len(jittered_truth(train, np.random.default_rng(0))[0])
         steps_per_epoch = int(np.ceil((len(cands.image) + n_jitter) / cfg.batch_size))
-    total = cfg.epochs * steps_per_epoch
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda s: float(min((s + 1) / 100, 0.5 * (1 + np.cos(np.pi * min(s / total, 1.0)))))
-    )
+    sched = warmup_cosine(opt, cfg.epochs * steps_per_epoch)
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
         start, history, best, _ = load_state(last_dir / STATE, opt, sched)
-    from torch.utils.tensorboard import SummaryWriter
-
-    writer = SummaryWriter(str(out / "tb"))
     info = {"detector": str(detector), "data": [str(d) for d in dirs], "config": asdict(cfg)}
     first_info = meta.get("training", {})
 
@@ -552,56 +540,20 @@ def train_refiner(
         save_checkpoint(folder, corner_net, CANDIDATES, first_info, net,
                         {**info, "epoch": epoch, **(extra or {})})  # fmt: skip
 
-    def save_last(epoch: int) -> None:
+    def save_last(epoch: int, best: tuple) -> None:
         save(last_dir, epoch)
         save_state(last_dir / STATE, opt, sched, epoch, history, best)
 
-    bar = _progress_bar() if progress else None
-    completed = start
-    try:
-        if bar is not None:
-            bar.start()
-        for epoch in range(start, cfg.epochs):
-            rng = np.random.default_rng([cfg.seed, epoch])
-            task = None
-            if bar is not None:
-                task = bar.add_task(f"epoch {epoch + 1}/{cfg.epochs}", total=steps_per_epoch,
-                                    loss=float("nan"))  # fmt: skip
-            t0 = time.perf_counter()
+    def one_epoch(epoch: int, rng: np.random.Generator, step) -> tuple[dict, dict, float]:
+        losses = train_epoch(net, opt, sched, train, cands, rcfg, rng, cfg.batch_size, step)
+        metrics = evaluate(net, val, val_cands.per_image, rcfg, cfg.min_gate_px)
+        return losses, metrics, _score(metrics)
 
-            def step(loss: float, task=task) -> None:
-                if bar is not None:
-                    bar.update(task, advance=1, loss=loss)
-
-            losses = train_epoch(net, opt, sched, train, cands, rcfg, rng, cfg.batch_size, step)
-            metrics = evaluate(net, val, val_cands.per_image, rcfg, cfg.min_gate_px)
-            score = _score(metrics)
-            row = {"epoch": epoch + 1, "seconds": round(time.perf_counter() - t0, 1),
-                   "loss": losses, "val": metrics, "score": round(score, 4)}  # fmt: skip
-            history.append(row)
-            for k, v in losses.items():
-                writer.add_scalar(f"refine_loss/{k}", v, epoch + 1)
-            writer.add_scalar("refine_val/score", score, epoch + 1)
-            writer.flush()
-            if score > best[0]:
-                best = (score, epoch + 1, metrics)
-                save(best_dir, epoch + 1, {"val": metrics})
-            save_last(epoch + 1)
-            completed = epoch + 1
-            atomic_write_json(out / "history.json", history)
-            if log is not None:
-                m = metrics
-                log(f"epoch {epoch + 1}: loss {losses['loss']:.3f}  val precision "
-                    f"{m['precision']}  recall {m['recall']}  median corner error "
-                    f"{m['corner_error_px']['median']} px  PCK@2px {m['pck']['2px']}  "
-                    f"PCK@5px {m['pck']['5px']}  ({row['seconds']} s)")  # fmt: skip
-    except KeyboardInterrupt:
-        save_last(completed)
-        raise
-    finally:
-        if bar is not None:
-            bar.stop()
-        writer.close()
+    best = run_epochs(
+        out, start, cfg.epochs, cfg.seed, steps_per_epoch, one_epoch,
+        lambda epoch, metrics: save(best_dir, epoch, {"val": metrics}), save_last, history, best,
+        "refine", progress, log,
+    )  # fmt: skip
     _, _, best_meta = load_checkpoint(best_dir)
     best_net = load_refiner(best_dir, best_meta)
     if cfg.tune:

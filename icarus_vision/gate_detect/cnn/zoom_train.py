@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import os
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -24,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
 from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
+from icarus_vision.gate_detect.cnn.stage_train import run_epochs, warmup_cosine
 from icarus_vision.gate_detect.cnn.zoom import (
     ZoomConfig,
     ZoomNet,
@@ -318,8 +317,6 @@ def train_zoom(
         FileNotFoundError / ValueError: bad detector or dataset, a detector without a refiner,
             or OUT/last present without ``resume`` (or missing with it).
     """
-    from torch.utils.tensorboard import SummaryWriter
-
     from icarus_vision.gate_detect.cnn import CnnDetector
     from icarus_vision.gate_detect.cnn.checkpoint import (
         export_zoom_onnx,
@@ -328,12 +325,7 @@ def train_zoom(
         load_zoom,
         save_checkpoint,
     )
-    from icarus_vision.gate_detect.cnn.train import (
-        _progress_bar,
-        load_state,
-        run_folders,
-        save_state,
-    )
+    from icarus_vision.gate_detect.cnn.train import load_state, run_folders, save_state
 
     cfg = replace(config or ZoomTrainConfig(), epochs=epochs, seed=seed)
     if cfg.epochs < 1:
@@ -379,70 +371,32 @@ def train_zoom(
         log(f"{len(train.targets)} corner patches to train on, {len(val.patches)} to validate")
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = int(np.ceil(len(train.targets) / cfg.batch_size))
-    total = cfg.epochs * steps_per_epoch
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda s: float(min((s + 1) / 100, 0.5 * (1 + np.cos(np.pi * min(s / total, 1.0)))))
-    )
+    sched = warmup_cosine(opt, cfg.epochs * steps_per_epoch)
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
         start, history, best, _ = load_state(last_dir / STATE, opt, sched)
-    writer = SummaryWriter(str(out / "tb"))
     info = {"detector": str(detector), "data": [str(d) for d in dirs], "val": str(val_dir),
             "config": asdict(cfg)}  # fmt: skip
 
     def save(folder: Path, epoch: int, zoom: ZoomNet, extra: dict | None = None) -> None:
         save_checkpoint(folder, corner_net, decode_cfg, meta.get("training", {}), refiner,
-                        meta.get("refine_training"), zoom, {**info, "epoch": epoch, **(extra or {})})  # fmt: skip
+                        meta.get("refine_training"), zoom,
+                        {**info, "epoch": epoch, **(extra or {})})  # fmt: skip
 
-    def save_last(epoch: int) -> None:
+    def save_last(epoch: int, best: tuple) -> None:
         save(last_dir, epoch, net)
         save_state(last_dir / STATE, opt, sched, epoch, history, best)
 
-    bar = _progress_bar() if progress else None
-    completed = start
-    try:
-        if bar is not None:
-            bar.start()
-        for epoch in range(start, cfg.epochs):
-            rng = np.random.default_rng([cfg.seed, epoch])
-            task = None
-            if bar is not None:
-                task = bar.add_task(f"epoch {epoch + 1}/{cfg.epochs}", total=steps_per_epoch,
-                                    loss=float("nan"))  # fmt: skip
-            t0 = time.perf_counter()
+    def one_epoch(epoch: int, rng: np.random.Generator, step) -> tuple[dict, dict, float]:
+        loss = train_epoch(net, opt, sched, train, rng, cfg.batch_size, step)
+        metrics = evaluate(net, val, net.cfg.min_side_px, cfg.min_gate_px)
+        return {"loss": loss}, metrics, metrics["score"]
 
-            def step(loss: float, task=task) -> None:
-                if bar is not None:
-                    bar.update(task, advance=1, loss=loss)
-
-            loss = train_epoch(net, opt, sched, train, rng, cfg.batch_size, step)
-            metrics = evaluate(net, val, net.cfg.min_side_px, cfg.min_gate_px)
-            row = {"epoch": epoch + 1, "seconds": round(time.perf_counter() - t0, 1),
-                   "loss": loss, "val": metrics, "score": metrics["score"]}  # fmt: skip
-            history.append(row)
-            writer.add_scalar("zoom_loss/l1", loss, epoch + 1)
-            writer.add_scalar("zoom_val/score", metrics["score"], epoch + 1)
-            writer.add_scalar("zoom_val/pck5", metrics["pck"]["5px"] or 0.0, epoch + 1)
-            writer.flush()
-            if metrics["score"] > best[0]:
-                best = (metrics["score"], epoch + 1, metrics)
-                save(best_dir, epoch + 1, net, {"val": metrics})
-            save_last(epoch + 1)
-            completed = epoch + 1
-            atomic_write_json(out / "history.json", history)
-            if log is not None:
-                m = metrics
-                log(f"epoch {epoch + 1}: loss {loss:.4f}  val precision {m['precision']}  "
-                    f"recall {m['recall']}  median corner error "
-                    f"{m['corner_error_px']['median']} px  PCK@2px {m['pck']['2px']}  "
-                    f"PCK@5px {m['pck']['5px']}  ({row['seconds']} s)")  # fmt: skip
-    except KeyboardInterrupt:
-        save_last(completed)
-        raise
-    finally:
-        if bar is not None:
-            bar.stop()
-        writer.close()
+    run_epochs(
+        out, start, cfg.epochs, cfg.seed, steps_per_epoch, one_epoch,
+        lambda epoch, metrics: save(best_dir, epoch, net, {"val": metrics}), save_last, history,
+        best, "zoom", progress, log,
+    )  # fmt: skip
     _, _, best_meta = load_checkpoint(best_dir)
     best_net = load_zoom(best_dir, best_meta)
     metrics = tune(best_net, val, cfg.min_gate_px)

@@ -1,0 +1,117 @@
+"""What the trainers of the detector's later stages (the refiner and the zoom stage) share: the
+learning-rate schedule and the epoch loop with its progress bar, TensorBoard logs, best and last
+checkpoints, history and Ctrl-C saving."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from icarus_vision.fileio import atomic_write_json
+
+WARMUP_STEPS = 100
+
+
+def warmup_cosine(
+    opt: torch.optim.Optimizer, total_steps: int
+) -> torch.optim.lr_scheduler.LambdaLR:
+    """:data:`WARMUP_STEPS` linear warm-up steps, then cosine decay to 0 at ``total_steps``."""
+    return torch.optim.lr_scheduler.LambdaLR(
+        opt,
+        lambda s: float(
+            min((s + 1) / WARMUP_STEPS, 0.5 * (1 + np.cos(np.pi * min(s / total_steps, 1.0))))
+        ),
+    )
+
+
+EpochFn = Callable[[int, np.random.Generator, Callable[[float], None]], tuple[dict, dict, float]]
+"""``one_epoch(epoch, rng, step) -> (mean loss terms with a "loss" key, val metrics, score)``;
+``step(mean loss so far)`` is called after every optimisation step."""
+
+
+def run_epochs(
+    out: Path,
+    first: int,
+    epochs: int,
+    seed: int,
+    steps_per_epoch: int,
+    one_epoch: EpochFn,
+    save_best: Callable[[int, dict], None],
+    save_last: Callable[[int, tuple], None],
+    history: list,
+    best: tuple,
+    tag: str,
+    progress: bool = True,
+    log: Callable[[str], None] | None = None,
+) -> tuple:
+    """Train epochs ``first`` + 1 to ``epochs`` of a run.
+
+    Each epoch calls ``one_epoch`` with a generator seeded by (seed, epoch) alone, so a resumed
+    run trains as one never interrupted; appends a row to ``history`` and writes it to
+    ``out/history.json``; logs the loss terms and val figures to TensorBoard (``out/tb``, tags
+    ``<tag>_loss/...`` and ``<tag>_val/...``); calls ``save_best(epoch, metrics)`` on a better
+    score, then ``save_last(epoch, best)``. Ctrl-C calls ``save_last`` for the epochs done and
+    re-raises.
+
+    Args:
+        best: (score, epoch, metrics) so far ((-1.0, -1, {}) for a new run).
+
+    Returns:
+        The best (score, epoch, metrics).
+    """
+    from torch.utils.tensorboard import SummaryWriter
+
+    from icarus_vision.gate_detect.cnn.train import _progress_bar
+
+    writer = SummaryWriter(str(out / "tb"))
+    bar = _progress_bar() if progress else None
+    completed = first
+    try:
+        if bar is not None:
+            bar.start()
+        for epoch in range(first, epochs):
+            task = None
+            if bar is not None:
+                task = bar.add_task(f"epoch {epoch + 1}/{epochs}", total=steps_per_epoch,
+                                    loss=float("nan"))  # fmt: skip
+
+            def step(loss: float, task=task) -> None:
+                if bar is not None:
+                    bar.update(task, advance=1, loss=loss)
+
+            t0 = time.perf_counter()
+            losses, metrics, score = one_epoch(epoch, np.random.default_rng([seed, epoch]), step)
+            row = {"epoch": epoch + 1, "seconds": round(time.perf_counter() - t0, 1),
+                   "loss": losses, "val": metrics, "score": round(score, 4)}  # fmt: skip
+            history.append(row)
+            for k, v in losses.items():
+                writer.add_scalar(f"{tag}_loss/{k}", v, epoch + 1)
+            writer.add_scalar(f"{tag}_val/score", score, epoch + 1)
+            for k, v in metrics.get("pck", {}).items():
+                if v is not None:
+                    writer.add_scalar(f"{tag}_val/pck_{k}", v, epoch + 1)
+            writer.flush()
+            if score > best[0]:
+                best = (score, epoch + 1, metrics)
+                save_best(epoch + 1, metrics)
+            save_last(epoch + 1, best)
+            completed = epoch + 1
+            atomic_write_json(out / "history.json", history)
+            if log is not None:
+                m = metrics
+                log(f"epoch {epoch + 1}: loss {losses['loss']:.4f}  val precision "
+                    f"{m['precision']}  recall {m['recall']}  median corner error "
+                    f"{m['corner_error_px']['median']} px  PCK@2px {m['pck']['2px']}  "
+                    f"PCK@5px {m['pck']['5px']}  ({row['seconds']} s)")  # fmt: skip
+    except KeyboardInterrupt:
+        save_last(completed, best)
+        raise
+    finally:
+        if bar is not None:
+            bar.stop()
+        writer.close()
+    return best
