@@ -27,6 +27,7 @@ from icarus_vision.gate_detect.cnn.zoom import (
     ZoomConfig,
     ZoomNet,
     homographies,
+    mirror_mean,
     rolled,
     sharpen,
     square,
@@ -98,6 +99,28 @@ def test_sharpen_moves_big_gates_corners_only():
     along = (step * edge).sum(axis=1) / (edge * edge).sum(axis=1)
     np.testing.assert_allclose(along, 0.2 * CFG.extent, atol=0.01)
     assert sharpen(Fixed([0.2, 0.0]), img, np.zeros((0, 4, 2)), CFG).shape == (0, 4, 2)
+
+
+def test_the_mirrored_reading_is_the_patch_mirrored_about_its_diagonal():
+    y = np.array([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0], [7.0, 8.0]])
+    np.testing.assert_allclose(mirror_mean(y), [[3.5, 3.5], [5.5, 5.5]])
+
+    class ReadsPatch(torch.nn.Module):
+        """Answers the red of the pixel at row 2, column 5, for both coordinates."""
+
+        def forward(self, x: torch.Tensor) -> torch.Tensor:
+            return torch.stack([x[:, 0, 2, 5], x[:, 0, 2, 5]], dim=1)
+
+    img = gate_image()
+    img[..., 0] = np.arange(320)[None, :] * 3 // 4  # red ramps along x: no symmetric patch
+    plain = sharpen(ReadsPatch(), img, QUAD[None], CFG)
+    both = sharpen(ReadsPatch(), img, QUAD[None], replace(CFG, mirror=True))
+    h, back = homographies(QUAD[None], CFG)
+    p = extract(img, h, CFG)[..., 0].astype(np.float64) / 255.0
+    # mirrored about the diagonal, pixel (2, 5) is read at (5, 2): each output is the mean of both
+    mean = 0.5 * (p[:, 2, 5] + p[:, 5, 2])
+    np.testing.assert_allclose(both[0], to_corners(back, np.stack([mean, mean], 1), CFG), atol=1e-4)
+    assert not np.allclose(plain, both, atol=1e-3)
 
 
 def test_a_few_training_steps_lower_the_loss():
@@ -215,6 +238,7 @@ def test_train_zoom_saves_on_ctrl_c_resumes_exactly_and_tunes(tiny_dataset, tmp_
             load_file(det / "model.safetensors").keys()  # fmt: skip
     meta = json.loads((tmp_path / "a" / "best" / "detector.json").read_text())
     assert meta["zoom"]["min_side_px"] in zt.MIN_SIDES and meta["zoom"]["patch"] == CFG.patch
+    assert isinstance(meta["zoom"]["mirror"], bool)
     assert meta["zoom_training"]["config"]["batch_size"] == 32 and "refine" in meta
     assert meta["zoom_training"]["val"]["score"] >= meta["zoom_training"]["val_untuned"]["score"]
     assert (tmp_path / "a" / "zoom.onnx").is_file() and (tmp_path / "a" / "examples.npz").is_file()

@@ -41,6 +41,10 @@ class ZoomConfig:
     """Units of the fully connected layer."""
     min_side_px: float = 20.0
     """Gates whose opening's mean side is under this (pixels) keep the refiner's corners."""
+    mirror: bool = False
+    """Also read each patch mirrored about its diagonal (the same corner seen from the other
+    edge: the output's two coordinates swap) and average the two readings (test-time
+    augmentation: twice the network's work)."""
 
     @property
     def scale(self) -> float:
@@ -140,6 +144,17 @@ def sharpen(net, image: np.ndarray, quads: np.ndarray, cfg: ZoomConfig) -> np.nd
         return out
     h, back = homographies(out[use], cfg)
     x = to_float(extract(image, h, cfg))
-    found = to_corners(back, run_network(net, x).astype(np.float64), cfg)
-    out[use] = found.reshape(-1, 4, 2)
+    if cfg.mirror:
+        x = np.concatenate([x, x.transpose(0, 1, 3, 2)])
+    y = run_network(net, x).astype(np.float64)
+    if cfg.mirror:
+        y = mirror_mean(y)
+    out[use] = to_corners(back, y, cfg).reshape(-1, 4, 2)
     return out
+
+
+def mirror_mean(y: np.ndarray) -> np.ndarray:
+    """(2M, 2) outputs on M patches, then on the same patches mirrored about their diagonal ->
+    (M, 2): the mean of both readings."""
+    m = len(y) // 2
+    return 0.5 * (y[:m] + y[m:, ::-1])

@@ -30,6 +30,7 @@ from icarus_vision.gate_detect.cnn.zoom import (
     ZoomConfig,
     ZoomNet,
     homographies,
+    mirror_mean,
     rolled,
     to_corners,
     to_targets,
@@ -41,7 +42,8 @@ STATE = "zoom_state.pt"
 EXAMPLES = "examples.npz"
 ZOOM_ONNX = "zoom.onnx"
 MIN_SIDES = (20.0, 25.0, 30.0, 40.0, 60.0)
-"""``ZoomConfig.min_side_px`` values tried on val (ties go to the larger: less work)."""
+"""``ZoomConfig.min_side_px`` values tried on val, each with and without ``mirror`` (ties go to
+less work: no mirroring, then the larger)."""
 TIE = 0.001
 """Val scores within this of the best count as ties."""
 
@@ -175,13 +177,19 @@ def val_frames(
     )  # fmt: skip
 
 
-def predict(net: ZoomNet, patches: np.ndarray, batch: int = 1024) -> np.ndarray:
-    """(M, 2) outputs of ``net`` (eval mode) on (M, P, P, 3) uint8 patches."""
+def predict(net: ZoomNet, patches: np.ndarray, mirror: bool = False, batch: int = 1024):
+    """(M, 2) outputs of ``net`` (eval mode) on (M, P, P, 3) uint8 patches; with ``mirror``, the
+    mean of its readings of each patch as it is and mirrored about its diagonal (as
+    :func:`~icarus_vision.gate_detect.cnn.zoom.sharpen` reads them)."""
     net.eval()
     out = [np.zeros((0, 2), np.float32)]
     with torch.inference_mode():
         for s in range(0, len(patches), batch):
-            out.append(net(to_tensor(patches[s : s + batch])).numpy())
+            x = to_tensor(patches[s : s + batch])
+            y = net(x).numpy()
+            if mirror:
+                y = mirror_mean(np.concatenate([y, net(x.transpose(2, 3)).numpy()]))
+            out.append(y)
     return np.concatenate(out)
 
 
@@ -208,12 +216,17 @@ def evaluate(net: ZoomNet, val: ValFrames, min_side_px: float, min_gate_px: floa
     return {**m, "score": round(score(m), 4), "min_side_px": min_side_px}
 
 
-def tune(net: ZoomNet, val: ValFrames, min_gate_px: float) -> dict:
-    """Val figures at the ``MIN_SIDES`` value with the best score (near ties: the largest)."""
-    outputs = predict(net, val.patches)
-    tried = [evaluate(net, val, s, min_gate_px, outputs) for s in MIN_SIDES]
-    best = max(m["score"] for m in tried)
-    return [m for m in tried if m["score"] >= best - TIE][-1]
+def tune(net: ZoomNet, val: ValFrames, min_gate_px: float) -> tuple[ZoomConfig, dict]:
+    """The ``min_side_px`` (``MIN_SIDES``) and ``mirror`` with the best val score (near ties:
+    the least work) and its val figures."""
+    tried = []
+    for mirror in (False, True):  # in order of work
+        outputs = predict(net, val.patches, mirror)
+        for s in MIN_SIDES[::-1]:
+            tried.append((replace(net.cfg, min_side_px=s, mirror=mirror),
+                          evaluate(net, val, s, min_gate_px, outputs)))  # fmt: skip
+    best = max(m["score"] for _, m in tried)
+    return next((c, m) for c, m in tried if m["score"] >= best - TIE)
 
 
 def augment(x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator):
@@ -375,7 +388,7 @@ def train_zoom(
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
         start, history, best, _ = load_state(last_dir / STATE, opt, sched)
-    info = {"detector": str(detector), "data": [str(d) for d in dirs], "val": str(val_dir),
+    info = {"detector": str(detector), "data": [str(d) for d in dirs], "val_data": str(val_dir),
             "config": asdict(cfg)}  # fmt: skip
 
     def save(folder: Path, epoch: int, zoom: ZoomNet, extra: dict | None = None) -> None:
@@ -399,13 +412,14 @@ def train_zoom(
     )  # fmt: skip
     _, _, best_meta = load_checkpoint(best_dir)
     best_net = load_zoom(best_dir, best_meta)
-    metrics = tune(best_net, val, cfg.min_gate_px)
-    tuned = ZoomNet(replace(best_net.cfg, min_side_px=metrics["min_side_px"]))
+    tuned_cfg, metrics = tune(best_net, val, cfg.min_gate_px)
+    tuned = ZoomNet(tuned_cfg)
     tuned.load_state_dict(best_net.state_dict())
-    done = best_meta["zoom_training"]
-    save(best_dir, done["epoch"], tuned.eval(), {"val": metrics, "val_untuned": done.get("val")})
+    done = best_meta["zoom_training"]  # a finished run resumed is only tuned again
+    untuned = done.get("val_untuned", done.get("val"))
+    save(best_dir, done["epoch"], tuned.eval(), {"val": metrics, "val_untuned": untuned})
     if log is not None:
-        log(f"tuned on val: zoom stage reads gates of at least {metrics['min_side_px']} px "
-            f"(score {metrics['score']})")  # fmt: skip
+        log(f"tuned on val: zoom stage reads gates of at least {tuned_cfg.min_side_px} px, "
+            f"mirror {tuned_cfg.mirror} (score {metrics['score']})")  # fmt: skip
     export_zoom_onnx(tuned, out / ZOOM_ONNX)
     return ZoomResult(out, done["epoch"], metrics, history)
