@@ -36,6 +36,10 @@ def train_zoom_cmd(
     patch: int = typer.Option(
         32, min=8, help="Side of a new stage's patches, px (a multiple of 8)."
     ),
+    widths: str = typer.Option(
+        "16,32,48,64", help="Channels of a new stage at full, half, quarter and eighth resolution."
+    ),
+    hidden: int = typer.Option(128, min=1, help="Units of a new stage's hidden layer."),
     extent: float = typer.Option(
         0.25,
         min=0.05,
@@ -52,6 +56,7 @@ def train_zoom_cmd(
     from it. At the end, the smallest gate the stage reads is tuned on val. Use the result with
     --detector cnn:OUT/best.
     """
+    from icarus_vision.commands.train_detector import parse_widths
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
     from icarus_vision.gate_detect.cnn.zoom import ZoomConfig
     from icarus_vision.gate_detect.cnn.zoom_train import ZoomTrainConfig, train_zoom
@@ -59,7 +64,9 @@ def train_zoom_cmd(
     result = train_zoom(
         SHIPPED if detector is None else detector, data, out, val_dir=val, epochs=epochs,
         seed=seed, resume=resume, config=ZoomTrainConfig(limit=limit),
-        zoom_config=ZoomConfig(patch=patch, extent=extent),
+        zoom_config=ZoomConfig(
+            patch=patch, extent=extent, widths=parse_widths(widths, 4), hidden=hidden
+        ),
         log=lambda s: console.print(s, highlight=False),
     )  # fmt: skip
     print_best(result.best_epoch, result.best_metrics, out, "best/, last/, zoom.onnx")

@@ -75,6 +75,10 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
         (["train-zoom", "--data", "{data}", "--out", "{tmp}/o", "--resume"], "nothing to resume"),
         (["train-zoom", "--data", "{data}", "--out", "{tmp}/o", "--patch", "20"], "multiple of 8"),
         (
+            ["train-zoom", "--data", "{data}", "--out", "{tmp}/o", "--widths", "8,16"],
+            "expected 4 positive integers",
+        ),
+        (
             ["train-zoom", "--data", "{data}", "--out", "{tmp}/o", "--detector", "{tmp}/none"],
             "none",
         ),
