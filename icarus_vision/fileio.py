@@ -35,6 +35,23 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         raise
 
 
+def atomic_write_npz(path: str | os.PathLike, **arrays) -> None:
+    """Write numpy ``arrays`` to an ``.npz`` file atomically, streamed to the temporary file (no
+    copy of the arrays in memory); read it back with ``np.load(path, allow_pickle=False)``."""
+    import numpy as np  # only this helper needs it
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **arrays)
+        publish(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write a UTF-8 text file atomically."""
     atomic_write_bytes(path, text.encode("utf-8"))

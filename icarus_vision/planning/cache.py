@@ -8,7 +8,6 @@ drag, radius) and the planner version, not names or the camera.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import re
 import zipfile
@@ -17,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from icarus_vision.fileio import atomic_write_bytes
+from icarus_vision.fileio import atomic_write_npz
 from icarus_vision.planning.result import PlanResult
 from icarus_vision.sim.quad import QuadParams
 from icarus_vision.sim.track import Track
@@ -53,10 +52,10 @@ def plan_path(track: Track, quad: QuadParams, cache_dir: str | Path = DEFAULT_CA
 def save_cached(result: PlanResult, track: Track, quad: QuadParams, cache_dir: str | Path) -> Path:
     """Write ``result`` to the cache atomically; returns the file."""
     meta = {f.name: getattr(result, f.name) for f in fields(result) if f.name not in _ARRAYS}
-    buf = io.BytesIO()
-    np.savez(buf, meta=np.array(json.dumps(meta)), **{a: getattr(result, a) for a in _ARRAYS})
     path = plan_path(track, quad, cache_dir)
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_npz(
+        path, meta=np.array(json.dumps(meta)), **{a: getattr(result, a) for a in _ARRAYS}
+    )
     return path
 
 

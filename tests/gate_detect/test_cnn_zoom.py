@@ -246,6 +246,28 @@ def test_train_zoom_saves_on_ctrl_c_resumes_exactly_and_tunes(tiny_dataset, tmp_
     assert make_detector(f"cnn:{tmp_path / 'a' / 'best'}").zoom is not None
 
 
+def test_a_finished_run_resumed_is_only_tuned_again(tiny_dataset, tmp_path, monkeypatch):
+    from safetensors.torch import load_file
+
+    monkeypatch.setattr(zt, "detections", _labelled_detections)
+    det = _detector(tmp_path)
+    cfg = zt.ZoomTrainConfig(batch_size=32, min_gate_px=8.0)
+    zt.train_zoom(det, tiny_dataset, tmp_path / "a", epochs=1, zoom_config=CFG, config=cfg,
+                  progress=False)  # fmt: skip
+    before = load_file(tmp_path / "a" / "best" / "zoom.safetensors")
+    (tmp_path / "a" / "examples.npz").unlink()
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("a finished run needs no training patches")
+
+    monkeypatch.setattr(zt, "training_examples", no_training)
+    zt.train_zoom(det, tiny_dataset, tmp_path / "a", epochs=1, resume=True, progress=False)
+    after = load_file(tmp_path / "a" / "best" / "zoom.safetensors")
+    assert all(torch.equal(before[k], after[k]) for k in before)
+    meta = json.loads((tmp_path / "a" / "best" / "detector.json").read_text())
+    assert meta["zoom_training"]["val_untuned"]["min_side_px"] == CFG.min_side_px
+
+
 def test_training_examples_are_the_matched_gates_corners(tiny_dataset, monkeypatch):
     monkeypatch.setattr(zt, "detections", _labelled_detections)
     split = load_split(tiny_dataset, "train")

@@ -143,14 +143,19 @@ def sharpen(net, image: np.ndarray, quads: np.ndarray, cfg: ZoomConfig) -> np.nd
     if not use.any():
         return out
     h, back = homographies(out[use], cfg)
-    x = to_float(extract(image, h, cfg))
-    if cfg.mirror:
-        x = np.concatenate([x, x.transpose(0, 1, 3, 2)])
-    y = run_network(net, x).astype(np.float64)
-    if cfg.mirror:
-        y = mirror_mean(y)
+    y = read(net, to_float(extract(image, h, cfg)), cfg.mirror)
     out[use] = to_corners(back, y, cfg).reshape(-1, 4, 2)
     return out
+
+
+def read(net, x: np.ndarray, mirror: bool) -> np.ndarray:
+    """(N, 2) float64 network outputs on (N, 3, P, P) float32 patches in [0, 1]; with
+    ``mirror``, each patch is also read mirrored about its diagonal (in the same call) and the
+    two readings averaged (:func:`mirror_mean`)."""
+    if mirror:
+        x = np.concatenate([x, x.transpose(0, 1, 3, 2)])
+    y = run_network(net, x).astype(np.float64)
+    return mirror_mean(y) if mirror else y
 
 
 def mirror_mean(y: np.ndarray) -> np.ndarray:

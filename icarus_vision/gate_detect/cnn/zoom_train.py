@@ -15,23 +15,24 @@ score the detector with the stage on the val split; at the end the smallest gate
 from __future__ import annotations
 
 import copy
-import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from icarus_vision.fileio import atomic_write_npz
 from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
+from icarus_vision.gate_detect.cnn.model import to_float
 from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
 from icarus_vision.gate_detect.cnn.stage_train import run_epochs, warmup_cosine
+from icarus_vision.gate_detect.cnn.tune import SCORE_TIE
 from icarus_vision.gate_detect.cnn.zoom import (
     ZoomConfig,
     ZoomNet,
     homographies,
-    mirror_mean,
-    rolled,
+    read,
     to_corners,
     to_targets,
     zoomable,
@@ -42,10 +43,8 @@ STATE = "zoom_state.pt"
 EXAMPLES = "examples.npz"
 ZOOM_ONNX = "zoom.onnx"
 MIN_SIDES = (20.0, 25.0, 30.0, 40.0, 60.0)
-"""``ZoomConfig.min_side_px`` values tried on val, each with and without ``mirror`` (ties go to
-less work: no mirroring, then the larger)."""
-TIE = 0.001
-"""Val scores within this of the best count as ties."""
+"""``ZoomConfig.min_side_px`` values tried on val, each with and without ``mirror`` (ties within
+``tune.SCORE_TIE`` go to less work: no mirroring, then the larger)."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +103,7 @@ class ValFrames:
     owner: np.ndarray
 
 
-def detections(detector, split: Split, progress: bool = False, what: str = "") -> list:
+def detections(detector, split: Split, progress: bool = False, what: str = "") -> Iterator:
     """Per image of ``split`` (loaded without pixels), the images and the detector's
     (corners, score) list; an iterator, so that the images are not all kept."""
     from rich.progress import track
@@ -141,7 +140,7 @@ def training_examples(
             noise = rng.normal(size=(tcfg.copies, 4, 2)) * tcfg.jitter * g["side"]
             quads = np.concatenate([q, q + noise])
             h, _ = homographies(quads, cfg)
-            t = to_targets(h, rolled(np.repeat(g["corners"][None], len(quads), 0))[:, 0], cfg)
+            t = to_targets(h, np.tile(g["corners"], (len(quads), 1)), cfg)
             ok = np.isfinite(t).all(axis=1) & (np.abs(t) < 1.5).all(axis=1)
             patches.append(extract(image, h[ok], cfg))
             targets.append(t[ok].astype(np.float32))
@@ -182,14 +181,9 @@ def predict(net: ZoomNet, patches: np.ndarray, mirror: bool = False, batch: int 
     mean of its readings of each patch as it is and mirrored about its diagonal (as
     :func:`~icarus_vision.gate_detect.cnn.zoom.sharpen` reads them)."""
     net.eval()
-    out = [np.zeros((0, 2), np.float32)]
-    with torch.inference_mode():
-        for s in range(0, len(patches), batch):
-            x = to_tensor(patches[s : s + batch])
-            y = net(x).numpy()
-            if mirror:
-                y = mirror_mean(np.concatenate([y, net(x.transpose(2, 3)).numpy()]))
-            out.append(y)
+    out = [np.zeros((0, 2))]
+    for s in range(0, len(patches), batch):
+        out.append(read(net, to_float(patches[s : s + batch]), mirror))
     return np.concatenate(out)
 
 
@@ -226,7 +220,7 @@ def tune(net: ZoomNet, val: ValFrames, min_gate_px: float) -> tuple[ZoomConfig, 
             tried.append((replace(net.cfg, min_side_px=s, mirror=mirror),
                           evaluate(net, val, s, min_gate_px, outputs)))  # fmt: skip
     best = max(m["score"] for _, m in tried)
-    return next((c, m) for c, m in tried if m["score"] >= best - TIE)
+    return next((c, m) for c, m in tried if m["score"] >= best - SCORE_TIE)
 
 
 def augment(x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator):
@@ -259,12 +253,6 @@ def train_epoch(net, opt, sched, ex: Examples, rng, batch_size: int, on_step=Non
         if on_step is not None:
             on_step(total / n)
     return total / max(n, 1)
-
-
-def _save_examples(path: Path, train: Examples) -> None:
-    tmp = path.with_name(f".{path.name}.tmp.npz")
-    np.savez(tmp, patches=train.patches, targets=train.targets)
-    os.replace(tmp, path)
 
 
 def _load_examples(path: Path) -> Examples:
@@ -369,21 +357,25 @@ def train_zoom(
     out.mkdir(parents=True, exist_ok=True)
     val = val_frames(det, load_split(val_dir, "val", None, cfg.limit), net.cfg, cfg.min_gate_px,
                      progress)  # fmt: skip
-    if resume and (out / EXAMPLES).is_file():
+    # a finished run resumed is only tuned again: no training patches needed
+    finished = resume and meta.get("zoom_training", {}).get("epoch", 0) >= cfg.epochs
+    train = None
+    if resume and not finished and (out / EXAMPLES).is_file():
         train = _load_examples(out / EXAMPLES)
-    else:
+    elif not finished:
         rng = np.random.default_rng(cfg.seed)
         parts = [training_examples(det, load_split(d, "train", None, cfg.limit), net.cfg, cfg,
                                    rng, progress) for d in dirs]  # fmt: skip
         train = Examples(np.concatenate([p.patches for p in parts]),
                          np.concatenate([p.targets for p in parts]))  # fmt: skip
-        _save_examples(out / EXAMPLES, train)
-    if not len(train.targets):
-        raise ValueError(f"{dirs}: the detector matched no gate to train the zoom stage on")
+        atomic_write_npz(out / EXAMPLES, patches=train.patches, targets=train.targets)
+        if not len(train.targets):
+            raise ValueError(f"{dirs}: the detector matched no gate to train the zoom stage on")
     if log is not None:
-        log(f"{len(train.targets)} corner patches to train on, {len(val.patches)} to validate")
+        log("a finished run: tuning it again ..." if finished else
+            f"{len(train.targets)} corner patches to train on, {len(val.patches)} to validate")  # fmt: skip
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    steps_per_epoch = int(np.ceil(len(train.targets) / cfg.batch_size))
+    steps_per_epoch = 1 if finished else int(np.ceil(len(train.targets) / cfg.batch_size))
     sched = warmup_cosine(opt, cfg.epochs * steps_per_epoch)
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
