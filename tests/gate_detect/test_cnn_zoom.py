@@ -1,4 +1,4 @@
-"""The detector's third stage: corner patches zoomed in, moving corners, training and checkpoints."""
+"""The detector's third stage: zoomed corner patches, moved corners, training, checkpoints."""
 
 from __future__ import annotations
 

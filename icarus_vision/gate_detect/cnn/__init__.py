@@ -6,8 +6,8 @@ resolution; ``decode.py`` groups corners into candidate gates. An optional secon
 corrects its corners; an optional third (``zoom.py``) reads each corner of a large gate again,
 zoomed in. ``runtime.py`` runs the networks (ONNX Runtime or PyTorch) on numpy arrays.
 ``train.py`` trains the first stage on gen-dataset output, ``refine_train.py`` the second,
-``zoom_train.py`` the third; ``checkpoint.py`` saves them as safetensors + JSON. The shipped default lives in
-``icarus_vision/models/detector/``.
+``zoom_train.py`` the third; ``checkpoint.py`` saves them as safetensors + JSON. The shipped
+default lives in ``icarus_vision/models/detector/``.
 """
 
 from __future__ import annotations

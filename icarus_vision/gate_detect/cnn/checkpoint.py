@@ -4,8 +4,9 @@ A checkpoint is a folder holding the weights (safetensors: tensors only, nothing
 unpickled) and a JSON file with the architecture, the decoding thresholds and how it was trained.
 A detector with a second stage also holds ``refiner.safetensors``, and its JSON a ``refine``
 section (:class:`~icarus_vision.gate_detect.cnn.refine.RefineConfig`); one with a third stage
-``zoom.safetensors`` and a ``zoom`` section (:class:`~icarus_vision.gate_detect.cnn.zoom.ZoomConfig`). Every file is written
-atomically. ``load_checkpoint`` accepts the folder or any of its files.
+``zoom.safetensors`` and a ``zoom`` section
+(:class:`~icarus_vision.gate_detect.cnn.zoom.ZoomConfig`). Every file is written atomically.
+``load_checkpoint`` accepts the folder or any of its files.
 """
 
 from __future__ import annotations

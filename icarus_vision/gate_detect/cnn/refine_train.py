@@ -42,7 +42,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     stage_scores,
     verdicts,
 )
-from icarus_vision.gate_detect.cnn.stage_train import run_epochs, warmup_cosine
+from icarus_vision.gate_detect.cnn.stage_train import run_epochs
 from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
 
 CANDIDATES = DecodeConfig(
@@ -479,7 +479,12 @@ def train_refiner(
         save_checkpoint,
     )
     from icarus_vision.gate_detect.cnn.data import load_split
-    from icarus_vision.gate_detect.cnn.train import load_state, run_folders, save_state
+    from icarus_vision.gate_detect.cnn.train import (
+        load_state,
+        run_folders,
+        save_state,
+        warmup_cosine,
+    )
     from icarus_vision.gate_detect.cnn.tune import score as _score
 
     cfg = replace(config or RefineTrainConfig(), epochs=epochs, seed=seed)

@@ -1,6 +1,6 @@
 """What the trainers of the detector's later stages (the refiner and the zoom stage) share: the
-learning-rate schedule and the epoch loop with its progress bar, TensorBoard logs, best and last
-checkpoints, history and Ctrl-C saving."""
+epoch loop with its progress bar, TensorBoard logs, best and last checkpoints, history and Ctrl-C
+saving (their schedule is ``train.warmup_cosine``)."""
 
 from __future__ import annotations
 
@@ -9,24 +9,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from icarus_vision.fileio import atomic_write_json
-
-WARMUP_STEPS = 100
-
-
-def warmup_cosine(
-    opt: torch.optim.Optimizer, total_steps: int
-) -> torch.optim.lr_scheduler.LambdaLR:
-    """:data:`WARMUP_STEPS` linear warm-up steps, then cosine decay to 0 at ``total_steps``."""
-    return torch.optim.lr_scheduler.LambdaLR(
-        opt,
-        lambda s: float(
-            min((s + 1) / WARMUP_STEPS, 0.5 * (1 + np.cos(np.pi * min(s / total_steps, 1.0))))
-        ),
-    )
-
 
 EpochFn = Callable[[int, np.random.Generator, Callable[[float], None]], tuple[dict, dict, float]]
 """``one_epoch(epoch, rng, step) -> (mean loss terms with a "loss" key, val metrics, score)``;

@@ -148,10 +148,7 @@ def train_detector(
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = int(np.ceil(len(train.files) / cfg.batch_size))
     total = cfg.epochs * steps_per_epoch
-    warm = max(1, min(200, total // 10))
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda s: float(min((s + 1) / warm, 0.5 * (1 + np.cos(np.pi * min(s / total, 1.0)))))
-    )
+    sched = warmup_cosine(opt, total, warmup=max(1, min(200, total // 10)))
     ema = _moving_average(model, cfg.ema_decay)
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
@@ -245,6 +242,19 @@ def train_detector(
             log(f"decoding thresholds tuned on val: {tuned}")
     export_onnx(best_model, out / "model.onnx")
     return TrainResult(out, len(history), best[1], best[2], history)
+
+
+def warmup_cosine(
+    opt: torch.optim.Optimizer, total_steps: int, warmup: int = 100
+) -> torch.optim.lr_scheduler.LambdaLR:
+    """``warmup`` linear warm-up steps, then cosine decay to 0 at ``total_steps`` (the schedule
+    of every stage's training)."""
+    return torch.optim.lr_scheduler.LambdaLR(
+        opt,
+        lambda s: float(
+            min((s + 1) / warmup, 0.5 * (1 + np.cos(np.pi * min(s / total_steps, 1.0))))
+        ),
+    )
 
 
 def run_folders(out: Path, resume: bool, state: str) -> tuple[Path, Path]:

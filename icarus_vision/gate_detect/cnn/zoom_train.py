@@ -26,7 +26,7 @@ from icarus_vision.fileio import atomic_write_npz
 from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
 from icarus_vision.gate_detect.cnn.model import to_float
 from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
-from icarus_vision.gate_detect.cnn.stage_train import run_epochs, warmup_cosine
+from icarus_vision.gate_detect.cnn.stage_train import run_epochs
 from icarus_vision.gate_detect.cnn.tune import SCORE_TIE
 from icarus_vision.gate_detect.cnn.zoom import (
     ZoomConfig,
@@ -76,7 +76,8 @@ class Examples:
     """Corner patches and where their corners truly are.
 
     Attributes:
-        patches: (M, P, P, 3) uint8 corner patches (:func:`~icarus_vision.gate_detect.cnn.zoom.homographies`).
+        patches: (M, P, P, 3) uint8 corner patches
+            (:func:`~icarus_vision.gate_detect.cnn.zoom.homographies`).
         targets: (M, 2) float32 true corner in each, half patches from its centre.
     """
 
@@ -326,7 +327,12 @@ def train_zoom(
         load_zoom,
         save_checkpoint,
     )
-    from icarus_vision.gate_detect.cnn.train import load_state, run_folders, save_state
+    from icarus_vision.gate_detect.cnn.train import (
+        load_state,
+        run_folders,
+        save_state,
+        warmup_cosine,
+    )
 
     cfg = replace(config or ZoomTrainConfig(), epochs=epochs, seed=seed)
     if cfg.epochs < 1:
@@ -371,9 +377,10 @@ def train_zoom(
         atomic_write_npz(out / EXAMPLES, patches=train.patches, targets=train.targets)
         if not len(train.targets):
             raise ValueError(f"{dirs}: the detector matched no gate to train the zoom stage on")
-    if log is not None:
-        log("a finished run: tuning it again ..." if finished else
-            f"{len(train.targets)} corner patches to train on, {len(val.patches)} to validate")  # fmt: skip
+    if log is not None and finished:
+        log("a finished run: tuning it again ...")
+    elif log is not None:
+        log(f"{len(train.targets)} corner patches to train on, {len(val.patches)} to validate")
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = 1 if finished else int(np.ceil(len(train.targets) / cfg.batch_size))
     sched = warmup_cosine(opt, cfg.epochs * steps_per_epoch)
