@@ -8,7 +8,7 @@ Usage::
                                   [--limit N] [--json PATH] [--backend-rounds N]
 
 For each detector: the test-split figures of ``eval_detector`` (precision, recall, corner error,
-PCK, by distance) and a latency run: ``detect`` on the first 50 test frames, 5 passes, on one
+PCK, by distance, and their 95 % bootstrap intervals over the test images) and a latency run: ``detect`` on the first 50 test frames, 5 passes, on one
 thread, reporting the median and 95th percentile ms per frame; for a CNN, also
 ``--backend-rounds`` alternating runs on each backend, PyTorch and ONNX Runtime (the median of
 their medians). Prints a table and one JSON object (also written to ``--json``). The machine's 1-minute load average is recorded:
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> dict:
     for spec in args.detectors:
         r = eval_detector(args.data, spec, limit=args.limit)
         keep = ("images", "gates", "min_gate_px", "precision", "recall", "corner_error_px", "pck",
-                "ms_per_frame", "by_distance", "by_size")  # fmt: skip
+                "confidence", "ms_per_frame", "by_distance", "by_size")  # fmt: skip
         out["detectors"][spec] = {k: r[k] for k in keep} | {"latency": latency(spec, args.data)}
         if spec.split(":")[0] == "cnn":  # both backends, alternating (the machine's load drifts)
             runs = {b: [] for b in ("torch", "onnxruntime")}
@@ -99,6 +99,9 @@ def main(argv: list[str] | None = None) -> dict:
         cells = " ".join(f"{'-' if x is None else f'{x:.3f}':>6}" for x in f)
         lat = r["latency"]
         print(f"{spec:10} {r['gates']:>6} {cells} {lat['median_ms']:>7.2f} {lat['p95_ms']:>7.2f}")
+        ci = r["confidence"]
+        print("  95 % intervals (bootstrap over images): " + ", ".join(
+            f"{k} {v[0]:.4f}-{v[1]:.4f}" for k, v in ci.items() if isinstance(v, list)))  # fmt: skip
         for b, v in r.get("latency_by_backend_ms", {}).items():
             print(f"  {b}: {v['median_of_medians']:.2f} ms per frame (median of {v['runs']})")
     print(json.dumps(out))

@@ -38,8 +38,13 @@ def eval_detector_cmd(
         None, help="Also draw test images with true and found gates (.jpg/.png)."
     ),
     num_examples: int = typer.Option(12, min=1, help="How many images --examples draws."),
+    resamples: int = typer.Option(
+        1000, min=0, help="Bootstrap resamples of the test images for 95 % intervals (0: none)."
+    ),
+    seed: int = typer.Option(0, help="Seed of the bootstrap."),
 ) -> None:
-    """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size.
+    """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size,
+    with 95 % confidence intervals (bootstrap over the test images).
 
     Also writes the detector's error model (gate-centre error and miss rate by distance) for
     `train-policy`'s perception noise.
@@ -60,7 +65,7 @@ def eval_detector_cmd(
 
         r = eval_detector(data, detector, json_path, error_model, min_gate_px, limit=limit,
                           progress=progress, examples_path=examples,
-                          examples=num_examples)  # fmt: skip
+                          examples=num_examples, seed=seed, resamples=resamples)  # fmt: skip
     table = Table(title=f"{r['detector']} on {r['images']} images, {r['gates']} gates >= "
                   f"{r['min_gate_px']:g} px")  # fmt: skip
     for col in ("distance m", "gates", "precision", "recall", "median px", "PCK@2", "PCK@5"):
@@ -70,6 +75,12 @@ def eval_detector_cmd(
                       _fmt(b["corner_error_px"]["median"]), _fmt(b["pck"]["2px"]),
                       _fmt(b["pck"]["5px"]))  # fmt: skip
     console.print(table)
+    ci = r["confidence"]
+    if ci:
+        names = {"precision": "precision", "recall": "recall", "corner_error_median_px":
+                 "median px", "pck_2px": "PCK@2", "pck_5px": "PCK@5"}  # fmt: skip
+        spans = ", ".join(f"{v} {ci[k][0]:.3f}-{ci[k][1]:.3f}" for k, v in names.items() if ci[k])
+        console.print(f"95 % intervals (bootstrap over images): {spans}", highlight=False)
     console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core)", highlight=False)
     if r["error_model_path"]:
         console.print(f"error model written to {escape(r['error_model_path'])}", highlight=False)

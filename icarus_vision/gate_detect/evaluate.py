@@ -23,6 +23,7 @@ from icarus_vision.gate_detect.metrics import (
     DISTANCE_BINS_M,
     SIZE_BINS_PX,
     binned,
+    confidence,
     evaluable,
     evaluate_image,
     summarize,
@@ -59,6 +60,8 @@ def eval_detector(
     progress: Callable[[int, int], None] | None = None,
     examples_path: str | Path | None = None,
     examples: int = 12,
+    seed: int = 0,
+    resamples: int = 1000,
 ) -> dict:
     """Evaluate a detector on a gen-dataset split.
 
@@ -75,23 +78,29 @@ def eval_detector(
         examples_path: also write a picture (JPEG or PNG, by suffix) of ``examples`` images spread
             evenly over the split, with the true (green) and detected (cyan, TL dotted) openings.
         examples: how many images that picture shows.
+        seed: seed of the bootstrap (``confidence``).
+        resamples: bootstrap resamples of the test images (0: no ``confidence``).
 
     Returns:
         the report: detector, images, gates, min_gate_px, precision, recall, corner_error_px
-        {mean, median}, pck {2px, 5px}, ms_per_frame, by_distance, by_size, matching_rule,
-        error_model (the model itself) and error_model_path.
+        {mean, median}, pck {2px, 5px}, confidence (95 % bootstrap intervals of those figures
+        over the test images: :func:`~icarus_vision.gate_detect.metrics.confidence`),
+        ms_per_frame, by_distance, by_size, matching_rule, error_model (the model itself) and
+        error_model_path.
 
     Raises:
         FileNotFoundError / ValueError: bad dataset (naming the first bad file) or detector spec.
     """
     if min_gate_px < 0:
         raise ValueError(f"min_gate_px must be >= 0, got {min_gate_px}")
+    if resamples < 0:
+        raise ValueError(f"resamples must be >= 0, got {resamples}")
     ext = (Path(examples_path).suffix.lower() or ".jpg") if examples_path is not None else None
     if ext is not None and not cv2.haveImageWriter(f"examples{ext}"):
         raise ValueError(f"{examples_path}: cannot write an image of this type (use .jpg or .png)")
     detector = make_detector(detector_spec)
     data = load_split(data_dir, split, None, limit)
-    gts, preds, samples, times, tiles = [], [], [], [], []
+    gts, preds, samples, times, tiles, per_image = [], [], [], [], [], []
     n = len(data.files)
     shown = set(np.linspace(0, n - 1, min(examples, n)).round().astype(int).tolist())
     with one_thread():
@@ -111,6 +120,7 @@ def eval_detector(
                     samples.append(_sample(g, gate, k))
             gts += g_rec
             preds += p_rec
+            per_image.append((g_rec, p_rec))
             if examples_path is not None and i in shown:
                 tiles.append(draw_detections(image, found, [t[0] for t in truth]))
             if progress is not None:
@@ -121,6 +131,9 @@ def eval_detector(
         "images": n,
         "min_gate_px": min_gate_px,
         **summarize(gts, preds, min_gate_px),
+        "confidence": (
+            confidence(per_image, min_gate_px, resamples, seed=seed) if resamples else None
+        ),
         "ms_per_frame": round(1000.0 * float(np.mean(times[1:] or times)), 3),
         "ms_per_frame_median": round(1000.0 * float(np.median(times)), 3),
         "by_distance": binned(gts, preds, "distance", DISTANCE_BINS_M, min_gate_px),

@@ -173,3 +173,78 @@ def binned(
 
 def _inside(x: float | None, lo: float, hi: float) -> bool:
     return x is not None and bool(np.isfinite(x)) and lo <= x < hi
+
+
+CI_FIGURES = ("precision", "recall", "corner_error_median_px", "pck_2px", "pck_5px")
+"""The headline figures :func:`confidence` gives intervals for."""
+
+
+def confidence(
+    images: list[tuple[list[dict], list[dict]]],
+    min_gate_px: float,
+    resamples: int = 1000,
+    level: float = 0.95,
+    seed: int = 0,
+) -> dict:
+    """Percentile-bootstrap confidence intervals of the headline figures (:data:`CI_FIGURES`).
+
+    Whole images are resampled with replacement, ``resamples`` times: the gates of one frame
+    share its light, background and camera motion, so they are not independent draws.
+
+    Args:
+        images: per image, its :func:`evaluate_image` records ``(gts, preds)``.
+        min_gate_px: smallest counted gate side.
+        resamples: bootstrap resamples.
+        level: coverage of each interval.
+        seed: seed of the resampling (same seed, same intervals).
+
+    Returns:
+        {figure: [low, high]} (None where a figure is undefined in some resample), plus
+        ``resamples`` and ``level``.
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if resamples < 1:
+        raise ValueError(f"resamples must be >= 1, got {resamples}")
+    n = len(images)
+    counts = np.zeros((n, 6))  # tp, fp, counted gates, matched counted, corners <= 2 px, <= 5 px
+    errors, owner = [], []
+    for i, (gts, preds) in enumerate(images):
+        counted = [g for g in gts if g["evaluable"] and g["side"] >= min_gate_px]
+        e = np.concatenate([g["errors"] for g in counted if g["matched"]] or [np.zeros(0)])
+        counts[i] = (sum(p["status"] == "tp" for p in preds),
+                     sum(p["status"] == "fp" for p in preds), len(counted),
+                     sum(g["matched"] for g in counted), (e <= 2.0).sum(), (e <= 5.0).sum())  # fmt: skip
+        errors.append(e)
+        owner.append(np.full(len(e), i))
+    rng = np.random.default_rng(seed)
+    weights = rng.multinomial(n, np.full(n, 1.0 / max(n, 1)), size=resamples).astype(float)
+    tp, fp, gates, matched, within2, within5 = (weights @ counts).T
+    e = np.concatenate(errors or [np.zeros(0)])
+    order = np.argsort(e, kind="stable")
+    e, owner_sorted = e[order], np.concatenate(owner or [np.zeros(0, int)])[order]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        figures = {
+            "precision": tp / (tp + fp),
+            "recall": matched / gates,
+            "corner_error_median_px": _weighted_medians(e, weights[:, owner_sorted]),
+            "pck_2px": within2 / (4.0 * gates),
+            "pck_5px": within5 / (4.0 * gates),
+        }
+    q = [100.0 * (1.0 - level) / 2.0, 100.0 * (1.0 + level) / 2.0]
+    out: dict = {}
+    for k, v in figures.items():
+        ok = np.isfinite(v).all() and len(v)
+        out[k] = [round(float(x), 4) for x in np.percentile(v, q)] if ok else None
+    return out | {"resamples": resamples, "level": level}
+
+
+def _weighted_medians(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(R,) lower medians of sorted ``values`` (M,) under each row of (R, M) ``weights`` (NaN
+    where a row's weights are all 0)."""
+    if not values.size:
+        return np.full(len(weights), np.nan)
+    cum = np.cumsum(weights, axis=1)
+    total = cum[:, -1:]
+    k = np.minimum((cum < 0.5 * total).sum(axis=1), values.size - 1)
+    return np.where(total[:, 0] > 0, values[k], np.nan)

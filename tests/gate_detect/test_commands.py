@@ -25,9 +25,12 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
     em = tmp_path / "em.json"
     r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--detector", "opencv",
                             "--json", str(out), "--error-model", str(em),
-                            "--examples", str(tmp_path / "ex.png")])  # fmt: skip
+                            "--examples", str(tmp_path / "ex.png"), "--resamples", "200",
+                            "--seed", "3"])  # fmt: skip
     assert r.exit_code == 0, r.output
-    assert json.loads(out.read_text())["detector"] == "opencv"
+    report = json.loads(out.read_text())
+    assert report["detector"] == "opencv" and report["confidence"]["resamples"] == 200
+    assert "95 % intervals" in r.output
     assert "distance_m" in json.loads(em.read_text())
     import cv2
 

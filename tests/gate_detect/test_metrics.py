@@ -11,7 +11,7 @@ import pytest
 from icarus_vision.gate_detect import Detector, GateDetection, register_detector
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.evaluate import eval_detector
-from icarus_vision.gate_detect.metrics import evaluate_image, match, summarize
+from icarus_vision.gate_detect.metrics import confidence, evaluate_image, match, summarize
 from icarus_vision.policy.perception_noise import ErrorModel
 
 SQUARE = np.array([[100.0, 100.0], [140.0, 100.0], [140.0, 140.0], [100.0, 140.0]])  # side 40
@@ -44,6 +44,43 @@ def test_occluded_and_partial_gates_are_ignored():
     outside = np.array([2, 2, 2, 0])
     gts, preds = evaluate_image([], [(SQUARE, hidden, 5.0), (SQUARE, outside, 5.0)], 20)
     assert summarize(gts, preds, 20)["gates"] == 0
+
+
+def _images(errors_px: list[float], misses: int, false_alarms: int) -> list:
+    """One image per gate found with all corners ``error`` px off, one per missed gate, one per
+    false alarm."""
+    far = SQUARE + 150
+    out = [evaluate_image([(SQUARE + [0.6 * e, 0.8 * e], 0.9)], [(SQUARE, VIS, 5.0)], 20)
+           for e in errors_px]  # fmt: skip
+    out += [evaluate_image([], [(SQUARE, VIS, 5.0)], 20) for _ in range(misses)]
+    return out + [evaluate_image([(far, 0.5)], [], 20) for _ in range(false_alarms)]
+
+
+def test_confidence_intervals_hold_the_figures_and_shrink_with_more_images():
+    errors = [0.5, 1.0, 1.5, 3.0, 6.0] * 8
+    images = _images(errors, 4, 6)
+    small = confidence(images, 20, resamples=500)
+    s = summarize(sum((g for g, _ in images), []), sum((p for _, p in images), []), 20)
+    assert small["precision"][0] <= s["precision"] <= small["precision"][1] < 1.0
+    assert small["recall"][0] <= s["recall"] <= small["recall"][1] < 1.0
+    assert small["pck_5px"][0] <= s["pck"]["5px"] <= small["pck_5px"][1]
+    assert small["corner_error_median_px"][0] <= 1.5 <= small["corner_error_median_px"][1]
+    big = confidence(_images(errors * 10, 40, 60), 20, resamples=500)
+    for k in ("precision", "recall", "pck_2px", "pck_5px"):
+        assert big[k][1] - big[k][0] < 0.6 * (small[k][1] - small[k][0]), k
+    assert confidence(images, 20, resamples=500) == small  # same seed, same intervals
+    assert confidence(images, 20, resamples=500, seed=1) != small
+
+
+def test_confidence_of_a_perfect_detector_is_a_point_and_bad_arguments_fail():
+    c = confidence(_images([1.0] * 10, 0, 0), 20, resamples=50)
+    assert c["precision"] == [1.0, 1.0] and c["pck_2px"] == [1.0, 1.0]
+    assert c["corner_error_median_px"] == [pytest.approx(1.0)] * 2
+    assert confidence(_images([], 3, 0), 20, resamples=50)["precision"] is None  # no detections
+    with pytest.raises(ValueError, match="level"):
+        confidence(_images([1.0], 0, 0), 20, level=1.5)
+    with pytest.raises(ValueError, match="resamples"):
+        confidence(_images([1.0], 0, 0), 20, resamples=0)
 
 
 class TruthDetector(Detector):
@@ -79,6 +116,7 @@ def test_eval_detector_on_shifted_truth(tiny_dataset, truth_detector, tmp_path):
     assert r["precision"] == 1.0 and r["recall"] == 1.0
     assert r["corner_error_px"]["median"] == pytest.approx(1.0)
     assert r["pck"] == {"2px": 1.0, "5px": 1.0}
+    assert r["confidence"]["recall"] == [1.0, 1.0] and r["confidence"]["resamples"] == 1000
     assert json.loads((tmp_path / "r.json").read_text())["gates"] == r["gates"]
     model = ErrorModel.load(tmp_path / "r.error_model.json")
     assert model.miss_rate == tuple(0.0 for _ in model.miss_rate)
@@ -105,6 +143,8 @@ def test_eval_detector_bad_arguments(tiny_dataset, tmp_path):
         eval_detector(tmp_path / "nowhere", "opencv")
     with pytest.raises(ValueError, match="unknown detector"):
         eval_detector(tiny_dataset, "nosuch")
+    with pytest.raises(ValueError, match="resamples"):
+        eval_detector(tiny_dataset, "opencv", resamples=-1)
 
 
 def test_pnp_centre_of_a_degenerate_quad_is_none():
