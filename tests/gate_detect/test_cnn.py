@@ -12,7 +12,7 @@ from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.cnn import CnnDetector
 from icarus_vision.gate_detect.cnn.augment import make_augment
 from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
-from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, mirror
+from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, load_splits, mirror
 from icarus_vision.gate_detect.cnn.decode import (
     DecodeConfig,
     apart,
@@ -193,6 +193,26 @@ def test_dataset_sample_has_peaks_at_the_gate_corners(tiny_dataset):
         cell = np.floor((gate.corners[k] + 0.5) / 4.0).astype(int)  # 160 px -> 40 cells
         if 0 <= cell[0] < 40 and 0 <= cell[1] < 30:
             assert target[1 + k, cell[1], cell[0]] == 1.0
+
+
+def test_several_datasets_load_as_one_split(tiny_dataset, tmp_path):
+    import json
+    import shutil
+
+    one = load_split(tiny_dataset, "train", (80, 60))
+    both = load_splits([tiny_dataset, tiny_dataset], "train", (80, 60))
+    assert both.files == one.files * 2 and len(both.gates) == 2 * len(one.gates)
+    np.testing.assert_array_equal(both.images, np.concatenate([one.images, one.images]))
+    assert load_splits([tiny_dataset], "val").images is None
+    other = tmp_path / "other"
+    shutil.copytree(tiny_dataset, other)
+    ann = other / "annotations" / "train.json"
+    coco = json.loads(ann.read_text())
+    for im in coco["images"]:
+        im["width"] = 320
+    ann.write_text(json.dumps(coco))
+    with pytest.raises(ValueError, match="different image sizes"):
+        load_splits([tiny_dataset, other], "train", (80, 60))
 
 
 def test_a_few_training_steps_lower_the_loss(tiny_dataset):

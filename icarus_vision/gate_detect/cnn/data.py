@@ -112,18 +112,43 @@ def load_split(
     if not infos:
         raise ValueError(f"{ann_path}: the {split} split holds no images")
     files = [root / "images" / im["file_name"] for im in infos]
-    images = None
-    if input_size is not None:
-        images = np.empty((len(files), input_size[1], input_size[0], 3), np.uint8)
-    for i, f in enumerate(files):
-        if images is None:
+    size = (int(infos[0]["width"]), int(infos[0]["height"]))
+    return Split(files, _read_images(files, input_size), [by_image[im["id"]] for im in infos],
+                 infos, size)  # fmt: skip
+
+
+def load_splits(
+    data_dirs: list[str | Path],
+    split: str,
+    input_size: tuple[int, int] | None = None,
+    limit: int | None = None,
+) -> Split:
+    """:func:`load_split` of several datasets as one split (their cameras the same size). The
+    images are read straight into one array: joining loaded splits would hold them twice.
+
+    Raises:
+        ValueError: datasets of different image sizes, or as :func:`load_split`.
+    """
+    parts = [load_split(d, split, None, limit) for d in data_dirs]
+    sizes = {s.image_size for s in parts}
+    if len(sizes) != 1:
+        raise ValueError(f"datasets of different image sizes cannot be combined: {sorted(sizes)}")
+    files = [f for s in parts for f in s.files]
+    return Split(files, _read_images(files, input_size), [g for s in parts for g in s.gates],
+                 [i for s in parts for i in s.image_info], parts[0].image_size)  # fmt: skip
+
+
+def _read_images(files: list[Path], input_size: tuple[int, int] | None) -> np.ndarray | None:
+    """(N, h, w, 3) uint8 images at ``input_size``; None: only check that the files exist."""
+    if input_size is None:
+        for f in files:
             if not f.is_file():
                 raise FileNotFoundError(f"{f}: image file not found")
-            continue
-        rgb = read_rgb(f)
-        images[i] = network_input(rgb, input_size)
-    size = (int(infos[0]["width"]), int(infos[0]["height"]))
-    return Split(files, images, [by_image[im["id"]] for im in infos], infos, size)
+        return None
+    images = np.empty((len(files), input_size[1], input_size[0], 3), np.uint8)
+    for i, f in enumerate(files):
+        images[i] = network_input(read_rgb(f), input_size)
+    return images
 
 
 class GateDataset(Dataset):

@@ -417,20 +417,6 @@ class RefineResult:
     history: list[dict]
 
 
-def concat_splits(splits: list[Split]) -> Split:
-    """One split holding the images and labels of several (same camera size)."""
-    sizes = {s.image_size for s in splits}
-    if len(sizes) != 1:
-        raise ValueError(f"datasets of different image sizes cannot be combined: {sorted(sizes)}")
-    return Split(
-        [f for s in splits for f in s.files],
-        np.concatenate([s.images for s in splits]),
-        [g for s in splits for g in s.gates],
-        [i for s in splits for i in s.image_info],
-        splits[0].image_size,
-    )
-
-
 def train_refiner(
     detector: str | Path,
     data_dir: str | Path | list[str | Path],
@@ -478,7 +464,7 @@ def train_refiner(
         load_refiner,
         save_checkpoint,
     )
-    from icarus_vision.gate_detect.cnn.data import load_split
+    from icarus_vision.gate_detect.cnn.data import load_split, load_splits
     from icarus_vision.gate_detect.cnn.train import (
         load_state,
         run_folders,
@@ -511,9 +497,7 @@ def train_refiner(
         raise ValueError("no training data given")
     # a finished run resumed is only tuned again: no training data needed
     finished = resume and meta.get("refine_training", {}).get("epoch", 0) >= cfg.epochs
-    train = None if finished else concat_splits(
-        [load_split(d, "train", size, cfg.limit) for d in dirs]
-    )  # fmt: skip
+    train = None if finished else load_splits(dirs, "train", size, cfg.limit)
     val = load_split(dirs[0], "val", size, cfg.limit)
     if log is not None:
         log("a finished run: tuning it again ..." if finished else
