@@ -17,7 +17,12 @@ def train_refiner_cmd(
         ...,
         help="gen-dataset output (train and val splits), ideally generated with a seed the "
         "first stage was not trained on; repeat to train on several (the first one's val split "
-        "validates).",
+        "validates, unless --val).",
+    ),
+    val: list[Path] = typer.Option(
+        None,
+        help="Datasets whose val splits, together, validate and tune (repeatable) [default: the "
+        "first --data]. A finished run resumed with other --val is tuned again on them.",
     ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, refiner.onnx, tb/."),
     detector: Path = typer.Option(
@@ -79,6 +84,6 @@ def train_refiner_cmd(
         refine_config=RefineConfig(
             patch=patch, widths=parse_widths(widths, 3), hidden=hidden, square_hfov_deg=square_hfov
         ),
-        log=lambda s: console.print(s, highlight=False),
+        log=lambda s: console.print(s, highlight=False), val_data=val or None,
     )  # fmt: skip
     print_best(result.best_epoch, result.best_metrics, out, "best/, last/, refiner.onnx")

@@ -353,6 +353,13 @@ def test_a_finished_run_resumed_is_only_tuned_again(tiny_dataset, tmp_path, monk
     assert read == []  # no split's candidates collected: tuning reads val itself
     assert (best / "refiner.safetensors").read_bytes() == weights
     assert json.loads((best / "detector.json").read_text())["refine"] == meta["refine"]
+    # tuned again on a bigger val set (the val split twice: twice the gates)
+    rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=1, resume=True, progress=False,
+                     val_data=[tiny_dataset, tiny_dataset])  # fmt: skip
+    again = json.loads((best / "detector.json").read_text())["refine_training"]
+    assert again["val_data"] == [str(tiny_dataset)] * 2
+    assert again["val"]["gates"] == 2 * meta["refine_training"]["val"]["gates"] > 0
+    assert (best / "refiner.safetensors").read_bytes() == weights
 
 
 def test_training_candidates_read_at_the_detectors_input(tiny_dataset, tmp_path, monkeypatch):

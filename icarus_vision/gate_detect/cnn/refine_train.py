@@ -428,6 +428,7 @@ def train_refiner(
     refine_config: RefineConfig | None = None,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
+    val_data: list[str | Path] | None = None,
 ) -> RefineResult:
     """Train (or resume training) the second stage of a trained corner network.
 
@@ -443,7 +444,8 @@ def train_refiner(
         data_dir: gen-dataset output, ideally generated with a seed the first stage was not
             trained on (its candidates' errors are then those of unseen images): its ``train``
             split is trained on, its ``val`` split validates and tunes. Several: the train
-            splits of all are trained on, the first one's val split validates.
+            splits of all are trained on, the first one's val split validates (unless
+            ``val_data``).
         out_dir: output folder.
         epochs: total epochs (a resumed run continues to this number).
         seed: seed of weights, shuffling and augmentation.
@@ -452,6 +454,9 @@ def train_refiner(
         refine_config: architecture of a new refiner.
         progress: show a rich progress bar.
         log: called with one line per epoch.
+        val_data: datasets whose val splits, together, validate every epoch and tune (default:
+            the first of ``data_dir``). A bigger val set makes both choices less noisy; a
+            finished run resumed with other ``val_data`` is tuned again on them.
 
     Raises:
         FileNotFoundError / ValueError: bad detector or dataset, or OUT/last present without
@@ -464,7 +469,7 @@ def train_refiner(
         load_refiner,
         save_checkpoint,
     )
-    from icarus_vision.gate_detect.cnn.data import load_split, load_splits
+    from icarus_vision.gate_detect.cnn.data import load_splits
     from icarus_vision.gate_detect.cnn.train import (
         load_state,
         run_folders,
@@ -498,7 +503,8 @@ def train_refiner(
     # a finished run resumed is only tuned again: no training data needed
     finished = resume and meta.get("refine_training", {}).get("epoch", 0) >= cfg.epochs
     train = None if finished else load_splits(dirs, "train", size, cfg.limit)
-    val = load_split(dirs[0], "val", size, cfg.limit)
+    val_dirs = list(val_data) if val_data else dirs[:1]
+    val = load_splits(val_dirs, "val", size, cfg.limit)
     if log is not None:
         log("a finished run: tuning it again ..." if finished else
             f"first-stage candidates of {len(train.files)} + {len(val.files)} images ...")  # fmt: skip
@@ -522,7 +528,8 @@ def train_refiner(
     start, history, best = 0, [], (-1.0, -1, {})
     if resume:
         start, history, best, _ = load_state(last_dir / STATE, opt, sched)
-    info = {"detector": str(detector), "data": [str(d) for d in dirs], "config": asdict(cfg)}
+    info = {"detector": str(detector), "data": [str(d) for d in dirs],
+            "val_data": [str(d) for d in val_dirs], "config": asdict(cfg)}  # fmt: skip
     first_info = meta.get("training", {})
 
     def save(folder: Path, epoch: int, extra: dict | None = None) -> None:
