@@ -8,8 +8,9 @@ Usage::
                                   [--limit N] [--json PATH] [--backend-rounds N]
 
 For each detector: the test-split figures of ``eval_detector`` (precision, recall, corner error,
-PCK, by distance, and their 95 % bootstrap intervals over the test images) and a latency run: ``detect`` on the first 50 test frames, 5 passes, on one
-thread, reporting the median and 95th percentile ms per frame; for a CNN, also
+PCK, by distance, and their 95 % bootstrap intervals over the test images) and a latency run:
+``detect`` on the first 50 test frames, 5 passes, on one thread, reporting the median and 95th
+percentile ms per frame; for a CNN, also
 ``--backend-rounds`` alternating runs on each backend, PyTorch and ONNX Runtime (the median of
 their medians). Prints a table and one JSON object (also written to ``--json``). The machine's 1-minute load average is recorded:
 timings on a busy machine are slower than on an idle core.
