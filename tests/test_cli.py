@@ -18,6 +18,17 @@ def test_help_on_every_command():
         assert res.exit_code == 0 and "Usage" in res.output
 
 
+@pytest.mark.parametrize(
+    "cmd, text",
+    [("train-detector", "default: 32"), ("train-zoom", "default: the shipped one"),
+     ("train-refiner", "default: the first --data")],
+)  # fmt: skip
+def test_help_shows_defaults_written_in_the_text(cmd, text):
+    # rich help drops a "[default: ...]" written into a help text; "(default: ...)" stays
+    res = runner.invoke(app, [cmd, "--help"])
+    assert res.exit_code == 0 and text in " ".join(res.output.replace("│", " ").split())
+
+
 def test_tracks_lists_builtin_tracks():
     res = runner.invoke(app, ["tracks"])
     assert res.exit_code == 0

@@ -30,10 +30,10 @@ def train_detector_cmd(
     widths: str | None = typer.Option(
         None,
         help="Channels of the four encoder stages of a new network, comma-separated "
-        "[default: 16,32,64,160].",
+        "(default: 16,32,64,160).",
     ),
     head_width: int | None = typer.Option(
-        None, min=1, help="Channels of a new network's decoder head [default: 32]."
+        None, min=1, help="Channels of a new network's decoder head (default: 32)."
     ),
     ema_decay: float = typer.Option(
         0.0,
@@ -47,7 +47,7 @@ def train_detector_cmd(
     ),
     input_size: str | None = typer.Option(
         None,
-        help="Frames are resized to this for the network, WxH [default: the camera's, 320x240].",
+        help="Frames are resized to this for the network, WxH (default: the camera's, 320x240).",
     ),
     lr: float = typer.Option(3e-3, min=0.0, help="Peak learning rate (lower to fine-tune)."),
 ) -> None:

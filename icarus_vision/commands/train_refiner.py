@@ -21,12 +21,12 @@ def train_refiner_cmd(
     ),
     val: list[Path] = typer.Option(
         None,
-        help="Datasets whose val splits, together, validate and tune (repeatable) [default: the "
-        "first --data]. A finished run resumed with other --val is tuned again on them.",
+        help="Datasets whose val splits, together, validate and tune (repeatable; default: the "
+        "first --data). A finished run resumed with other --val is tuned again on them.",
     ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, refiner.onnx, tb/."),
     detector: Path = typer.Option(
-        None, help="The first stage: a detector checkpoint [default: the shipped one]."
+        None, help="The first stage: a detector checkpoint (default: the shipped one)."
     ),
     epochs: int = typer.Option(12, min=1, help="Total epochs (a resumed run continues to this)."),
     seed: int = typer.Option(0, help="Random seed (weights, shuffling, augmentation)."),

@@ -20,10 +20,10 @@ def train_zoom_cmd(
     ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, zoom.onnx, tb/."),
     val: Path = typer.Option(
-        None, help="The dataset whose val split validates and tunes [default: the first --data]."
+        None, help="The dataset whose val split validates and tunes (default: the first --data)."
     ),
     detector: Path = typer.Option(
-        None, help="The detector (with a refiner) to add the stage to [default: the shipped one]."
+        None, help="The detector (with a refiner) to add the stage to (default: the shipped one)."
     ),
     epochs: int = typer.Option(6, min=1, help="Total epochs (a resumed run continues to this)."),
     seed: int = typer.Option(0, help="Random seed (jitter, weights, shuffling, augmentation)."),
