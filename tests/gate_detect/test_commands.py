@@ -111,8 +111,8 @@ def test_train_detector_help_states_the_model_defaults():
 
     params = {p.name: p for p in typer.main.get_command(app).commands["train-detector"].params}
     default = ModelConfig()
-    assert f"[default: {','.join(map(str, default.widths))}]" in params["widths"].help
-    assert f"[default: {default.head_width}]" in params["head_width"].help
+    assert f"(default: {','.join(map(str, default.widths))})" in params["widths"].help
+    assert f"(default: {default.head_width})" in params["head_width"].help
 
 
 def test_train_refiner_builds_the_refiner_asked_for_and_tunes_it(tiny_dataset, tmp_path):
