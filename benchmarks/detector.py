@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.evaluate import eval_detector, one_thread
@@ -107,7 +108,7 @@ def main(argv: list[str] | None = None) -> dict:
             print(f"  {b}: {v['median_of_medians']:.2f} ms per frame (median of {v['runs']})")
     print(json.dumps(out))
     if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=2))
+        atomic_write_json(args.json, out)
     return out
 
 

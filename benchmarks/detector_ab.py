@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.evaluate import one_thread
@@ -80,7 +81,7 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"A {out['a']}: {out['median_ms']['a']} ms; B {out['b']}: {out['median_ms']['b']} ms")
     print(json.dumps(out))
     if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=2))
+        atomic_write_json(args.json, out)
     return out
 
 

@@ -41,6 +41,7 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
+from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.decode import decode
@@ -210,7 +211,7 @@ def main(argv: list[str] | None = None) -> dict:
     )
     print(json.dumps(out))
     if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=2))
+        atomic_write_json(args.json, out)
     return out
 
 
