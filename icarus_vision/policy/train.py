@@ -16,15 +16,13 @@ step count and curriculum stage intact.
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from icarus_vision.fileio import atomic_write_json, publish
+from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.policy.callbacks import (
     CurriculumCallback,
     MetricsCallback,
@@ -82,14 +80,8 @@ def evaluate_model(model, cfg: TrainConfig, num_gates: int, episodes: int, seed:
 
 
 def _save_checkpoint(model, ckpt_dir: Path, state: dict) -> None:
-    ckpt_dir.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=ckpt_dir, prefix=".last.", suffix=".zip")
-    os.close(fd)
-    try:
+    with atomic_path(ckpt_dir / "last.zip", suffix=".zip") as tmp:
         model.save(tmp)
-        publish(tmp, ckpt_dir / "last.zip")
-    finally:
-        Path(tmp).unlink(missing_ok=True)
     atomic_write_json(ckpt_dir / "last_state.json", state)
 
 

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from icarus_vision.fileio import publish
+from icarus_vision.fileio import atomic_path
 from icarus_vision.render.camera import Camera
 from icarus_vision.sim.track import Track
 
@@ -111,16 +110,9 @@ def write_video(path: str | os.PathLike, frames: list[np.ndarray], fps: float) -
 
     if not frames:
         raise ValueError("no frames to write")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(
-        dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix or ".mp4"
-    )
-    os.close(fd)
-    try:
-        with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=16) as w:
-            for f in frames:
-                w.append_data(f)
-        publish(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    with (
+        atomic_path(path, suffix=Path(path).suffix or ".mp4") as tmp,
+        imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=16) as w,
+    ):
+        for f in frames:
+            w.append_data(f)

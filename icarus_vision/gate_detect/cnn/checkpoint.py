@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import warnings
 from dataclasses import asdict
 from pathlib import Path
@@ -22,7 +21,7 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
-from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
+from icarus_vision.fileio import atomic_path, atomic_write_bytes, atomic_write_json
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
@@ -37,9 +36,8 @@ SHIPPED = Path(__file__).resolve().parents[2] / "models" / "detector"
 
 
 def _save_weights(module: torch.nn.Module, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    save_file({k: v.detach().contiguous() for k, v in module.state_dict().items()}, str(tmp))
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        save_file({k: v.detach().contiguous() for k, v in module.state_dict().items()}, str(tmp))
 
 
 def save_checkpoint(

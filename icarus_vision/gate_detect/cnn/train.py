@@ -18,7 +18,6 @@ resume) and re-raises ``KeyboardInterrupt``. Each epoch's shuffle and augmentati
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
@@ -28,7 +27,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
-from icarus_vision.fileio import atomic_write_json
+from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
 from icarus_vision.gate_detect.cnn.data import GateDataset, load_split
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
@@ -282,9 +281,8 @@ def save_state(
     state = {"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
              "history": json.dumps(history), "best_score": best[0], "best_epoch": best[1],
              "best_metrics": json.dumps(best[2]), **(extra or {})}  # fmt: skip
-    tmp = path.with_name(f".{path.name}.tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
 
 
 def load_state(path: Path, opt, sched) -> tuple[int, list, tuple, dict]:
