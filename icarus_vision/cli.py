@@ -51,6 +51,7 @@ from icarus_vision.commands import eval_estimator as _eval_estimator  # noqa: E4
 from icarus_vision.commands import eval_policy as _eval_policy  # noqa: E402,F401
 from icarus_vision.commands import gen_dataset as _gen_dataset  # noqa: E402,F401
 from icarus_vision.commands import plan as _plan  # noqa: E402,F401
+from icarus_vision.commands import quantize_detector as _quantize_detector  # noqa: E402,F401
 from icarus_vision.commands import race as _race  # noqa: E402,F401
 from icarus_vision.commands import tracks as _tracks  # noqa: E402,F401
 from icarus_vision.commands import train_detector as _train_detector  # noqa: E402,F401

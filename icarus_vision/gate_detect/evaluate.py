@@ -82,7 +82,7 @@ def eval_detector(
         resamples: bootstrap resamples of the test images (0: no ``confidence``).
 
     Returns:
-        the report: detector, images, gates, min_gate_px, precision, recall, corner_error_px
+        the report: detector, backend (a CNN's: what ran its networks), images, gates, min_gate_px, precision, recall, corner_error_px
         {mean, median}, pck {2px, 5px}, confidence (95 % bootstrap intervals of those figures
         over the test images: :func:`~icarus_vision.gate_detect.metrics.confidence`),
         ms_per_frame, by_distance, by_size, matching_rule, error_model (the model itself) and
@@ -127,6 +127,7 @@ def eval_detector(
                 progress(i + 1, n)
     report = {
         "detector": detector_spec,
+        "backend": getattr(detector, "backend", None),
         "split": split,
         "images": n,
         "min_gate_px": min_gate_px,

@@ -26,6 +26,7 @@ from icarus_vision.gate_detect.base import Detector, GateDetection, validate_ima
 from icarus_vision.gate_detect.cnn.checkpoint import (
     SHIPPED,
     load_checkpoint,
+    load_int8,
     load_refiner,
     load_zoom,
 )
@@ -68,18 +69,32 @@ def frozen_trace(model: nn.Module, example: torch.Tensor | tuple) -> nn.Module:
         return model
 
 
-BACKENDS = ("auto", "torch", "onnxruntime")
+BACKENDS = ("auto", "torch", "onnxruntime", "int8")
 """What runs the networks (:class:`CnnDetector`'s ``backend``)."""
+
+
+def _cpu_flags() -> str:
+    """This CPU's flags (Linux /proc/cpuinfo; empty elsewhere)."""
+    try:
+        return Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return ""
 
 
 @functools.cache
 def native_bf16() -> bool:
     """Whether this CPU computes in bfloat16 natively (AVX512-BF16 or AMX; Linux /proc/cpuinfo)."""
-    try:
-        flags = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return False
+    flags = _cpu_flags()
     return "avx512_bf16" in flags or "amx_bf16" in flags
+
+
+@functools.cache
+def native_int8() -> bool:
+    """Whether this CPU has 8-bit dot products (AVX512-VNNI, AVX-VNNI or AMX; Linux
+    /proc/cpuinfo). Without them ONNX Runtime's int8 kernels can saturate intermediate sums
+    (its quantization documentation advises 7-bit weights there), so ``auto`` stays in float32."""
+    flags = _cpu_flags()
+    return any(f in flags for f in ("avx512_vnni", "avx_vnni", "amx_int8"))
 
 
 class CnnDetector(Detector):
@@ -92,18 +107,23 @@ class CnnDetector(Detector):
             the detector is built. 1 by default: this small network gains nothing from more
             threads, and threads contending with other work on a busy machine can slow every
             frame down many times (switching per call costs more than the inference itself).
-        bf16: run the network in bfloat16 (it was trained under bfloat16 autocast), about 1.5x
-            faster where the CPU has bfloat16 arithmetic; None: where it has
-            (:func:`native_bf16`). Decoding stays float32.
+        bf16: run the corner network in bfloat16 on the torch backend (it was trained under
+            bfloat16 autocast); None: where the CPU has bfloat16 arithmetic (:func:`native_bf16`)
+            and the backend is torch. Decoding stays float32.
         frozen: run a TorchScript-frozen trace of the network (:func:`frozen_trace`): the same
             output, faster.
         refiner: a trained second stage (:class:`RefineNet`): ``decode_cfg`` then yields its
             candidates, and it decides which are gates and where their corners are. It runs in
             float32 (frozen when ``frozen``).
-        backend: "torch" (PyTorch, frozen when ``frozen``), "onnxruntime" (both networks
+        backend: "torch" (PyTorch, frozen when ``frozen``), "onnxruntime" (the networks
             exported to ONNX when the detector is built, about a second, and run by ONNX
-            Runtime in float32: about 1.4x faster than PyTorch on a CPU core without bfloat16;
-            README) or "auto": PyTorch where it runs in bfloat16, else ONNX Runtime.
+            Runtime in float32), "int8" (ONNX Runtime running the int8 copies in ``int8``) or
+            "auto": "torch" when ``bf16`` is True, else "int8" where there are int8 copies and
+            the CPU has 8-bit dot products (:func:`native_int8`), else "onnxruntime" (README:
+            Detection, for what each costs).
+        int8: int8 ONNX copies of the networks by name (``model``, ``refiner``, ``zoom``; from
+            ``quantize.py`` via :func:`~icarus_vision.gate_detect.cnn.checkpoint.load_int8`),
+            each for the network of the same weights passed here.
         zoom: a trained third stage (:class:`ZoomNet`): it reads each corner of every reported
             gate at least ``zoom.cfg.min_side_px`` across again, zoomed in, and moves it. It
             runs as the refiner does.
@@ -121,24 +141,37 @@ class CnnDetector(Detector):
         refiner: RefineNet | None = None,
         backend: str = "auto",
         zoom: ZoomNet | None = None,
+        int8: dict[str, bytes] | None = None,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        needed = {"model"} | {k for k, v in (("refiner", refiner), ("zoom", zoom)) if v is not None}
+        if backend == "int8" and not needed <= set(int8 or {}):
+            raise ValueError(
+                f"the int8 backend needs int8 copies of {sorted(needed)} (icarus-vision "
+                f"quantize-detector), got {sorted(int8 or {})}"
+            )
         # Folded batch norm and channels-last memory: about 1.4x faster on a CPU core.
         self._float32 = fuse_batchnorm(model.eval()).to(memory_format=torch.channels_last)
-        self._nets: dict = {}  # by (bf16, frozen), or "onnxruntime"
+        self._nets: dict = {}  # by (bf16, frozen), or "onnxruntime" or "int8"
         if threads is not None and torch.get_num_threads() != threads:
             torch.set_num_threads(threads)
         self.decode_cfg = decode_cfg
         self.nms_iou = decode_cfg.nms_iou  # of the output (with a refiner, not its candidates')
         self.input_size = tuple(model.cfg.input_size)
-        if backend == "onnxruntime" and bf16:
+        if backend in ("onnxruntime", "int8") and bf16:
             raise ValueError("bf16 runs on the torch backend only")
-        if bf16 is None:
-            bf16 = backend != "onnxruntime" and native_bf16()
-        self.bf16 = bool(bf16)
         if backend == "auto":
-            backend = "torch" if self.bf16 else "onnxruntime"
+            if bf16:
+                backend = "torch"
+            elif needed <= set(int8 or {}) and native_int8():
+                backend = "int8"
+            else:
+                backend = "onnxruntime"
+        if bf16 is None:
+            bf16 = backend == "torch" and native_bf16()
+        self.bf16 = bool(bf16)
+        self.int8 = int8 if backend == "int8" else None
         self.backend = backend
         self.threads = threads
         self.frozen = frozen
@@ -155,17 +188,19 @@ class CnnDetector(Detector):
             p = refiner.cfg.patch
             example = (torch.zeros(2, p, p, 3).permute(0, 3, 1, 2),
                        torch.zeros(2, refiner.cfg.num_geom))  # fmt: skip
-            self.refiner = self._runner(refiner, example)
+            self.refiner = self._runner(refiner, example, "refiner")
         self.zoom_cfg = None if zoom is None else zoom.cfg
         self.zoom = None
         if zoom is not None:
             p = zoom.cfg.patch
-            self.zoom = self._runner(zoom, (torch.zeros(2, p, p, 3).permute(0, 3, 1, 2),))
+            self.zoom = self._runner(zoom, (torch.zeros(2, p, p, 3).permute(0, 3, 1, 2),), "zoom")
 
-    def _runner(self, net: nn.Module, example: tuple) -> nn.Module | OnnxRuntimeNet:
-        """A patch network as the backend runs it: batch norm folded, channels-last (faster on
-        a CPU core; it reads contiguous patches too), then exported to ONNX Runtime or frozen
-        (:attr:`frozen`) on ``example`` inputs."""
+    def _runner(self, net: nn.Module, example: tuple, name: str) -> nn.Module | OnnxRuntimeNet:
+        """A patch network as the backend runs it: its int8 copy ``name``; else batch norm
+        folded, channels-last (faster on a CPU core; it reads contiguous patches too), then
+        exported to ONNX Runtime or frozen (:attr:`frozen`) on ``example`` inputs."""
+        if self.backend == "int8":
+            return OnnxRuntimeNet.from_onnx(self.int8[name], self.threads, f"int8 {name}")
         net = fuse_batchnorm(copy.deepcopy(net).eval()).to(memory_format=torch.channels_last)
         if self.backend == "onnxruntime":
             return OnnxRuntimeNet(net, example, self.threads)
@@ -177,6 +212,11 @@ class CnnDetector(Detector):
         :class:`OnnxRuntimeNet` on that backend; else a bfloat16 copy when :attr:`bf16` (weights
         cast once, not per call as autocast would; about 0.3 ms less per frame), else the
         float32 one; frozen when :attr:`frozen`."""
+        if self.backend == "int8":
+            if "int8" not in self._nets:
+                model = self.int8["model"]
+                self._nets["int8"] = OnnxRuntimeNet.from_onnx(model, self.threads, "int8 model")
+            return self._nets["int8"]
         if self.backend == "onnxruntime":
             if "onnxruntime" not in self._nets:
                 w, h = self.input_size
@@ -197,12 +237,14 @@ class CnnDetector(Detector):
 
     @classmethod
     def load(cls, path: str | Path | None = None, **settings) -> CnnDetector:
-        """From a checkpoint folder or file (None: the shipped default); ``settings``: the
-        constructor's ``threads``, ``bf16``, ``frozen``, ``backend``."""
+        """From a checkpoint folder or file (None: the shipped default), with its int8 copies
+        if it has them; ``settings``: the constructor's ``threads``, ``bf16``, ``frozen``,
+        ``backend``."""
         path = SHIPPED if path is None else path
         model, decode_cfg, meta = load_checkpoint(path)
         refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
-        return cls(model, decode_cfg, refiner=refiner, zoom=zoom, **settings)
+        int8 = load_int8(path, meta)
+        return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=int8, **settings)
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""

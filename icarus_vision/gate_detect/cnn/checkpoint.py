@@ -5,12 +5,16 @@ unpickled) and a JSON file with the architecture, the decoding thresholds and ho
 A detector with a second stage also holds ``refiner.safetensors``, and its JSON a ``refine``
 section (:class:`~icarus_vision.gate_detect.cnn.refine.RefineConfig`); one with a third stage
 ``zoom.safetensors`` and a ``zoom`` section
-(:class:`~icarus_vision.gate_detect.cnn.zoom.ZoomConfig`). Every file is written atomically.
+(:class:`~icarus_vision.gate_detect.cnn.zoom.ZoomConfig`). A quantized one (``quantize.py``) also
+holds int8 ONNX copies of its networks (``model.int8.onnx``, ``refiner.int8.onnx``,
+``zoom.int8.onnx``), and its JSON an ``int8`` section naming the float weights each was made from
+(SHA-256). Every file is written atomically.
 ``load_checkpoint`` accepts the folder or any of its files.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import warnings
@@ -31,6 +35,10 @@ FORMAT = "icarus-vision-detector/1"
 WEIGHTS, CONFIG, ONNX = "model.safetensors", "detector.json", "model.onnx"
 REFINER, REFINER_ONNX = "refiner.safetensors", "refiner.onnx"
 ZOOM = "zoom.safetensors"
+FLOAT_WEIGHTS = {"model": WEIGHTS, "refiner": REFINER, "zoom": ZOOM}
+"""Each network's float weights file, by name."""
+INT8 = {name: f"{name}.int8.onnx" for name in FLOAT_WEIGHTS}
+"""Each network's int8 copy (``quantize.py``), by name."""
 SHIPPED = Path(__file__).resolve().parents[2] / "models" / "detector"
 """The default detector shipped inside the package."""
 
@@ -52,9 +60,12 @@ def save_checkpoint(
 ) -> Path:
     """Write ``folder/model.safetensors`` and ``folder/detector.json`` (atomically), with a
     ``refiner`` (its config inside it) ``folder/refiner.safetensors`` and with a ``zoom`` stage
-    ``folder/zoom.safetensors``; returns folder."""
+    ``folder/zoom.safetensors``; returns folder. Int8 copies there are deleted: they were made
+    from other weights."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    for name in INT8.values():
+        (folder / name).unlink(missing_ok=True)
     _save_weights(model, folder / WEIGHTS)
     meta = {"format": FORMAT, "model": model.cfg.to_dict(), "decode": asdict(decode)}
     if refiner is not None:
@@ -153,6 +164,65 @@ def _load_stage(path, meta: dict, key: str, weights: str, what: str, net_cls, cf
         raise ValueError(f"{folder / CONFIG}: not a valid {what} config ({e})") from None
     _load_weights(net, w_path, what)
     return net.eval()
+
+
+def sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes (hex)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def save_int8(folder: str | Path, models: dict[str, bytes], record: dict) -> None:
+    """Add int8 copies of the checkpoint's networks (ONNX ``models`` by name: ``model``,
+    ``refiner``, ``zoom``) to the checkpoint at ``folder``: each file written atomically, then
+    the ``int8`` section of its JSON (``record``, plus each file and its float weights'
+    SHA-256), which makes them count."""
+    folder = resolve(folder)
+    meta = json.loads((folder / CONFIG).read_text())
+    networks = {}
+    for name, model in models.items():
+        atomic_write_bytes(folder / INT8[name], model)
+        networks[name] = {"file": INT8[name], "float_sha256": sha256(folder / FLOAT_WEIGHTS[name])}
+    meta["int8"] = {**record, "networks": networks}
+    atomic_write_json(folder / CONFIG, meta)
+
+
+def load_int8(path: str | Path, meta: dict) -> dict[str, bytes] | None:
+    """The int8 ONNX copies of the checkpoint's networks, by name; None if it has none.
+
+    Raises:
+        FileNotFoundError: an ``int8`` section without its file (named).
+        ValueError: a copy made from other weights than the checkpoint's, or not an ONNX model
+            (the file is named), or a bad section.
+    """
+    if "int8" not in meta:
+        return None
+    import onnx
+
+    folder = resolve(path)
+    try:
+        networks = meta["int8"]["networks"]
+        entries = {name: (networks[name]["file"], networks[name]["float_sha256"])
+                   for name in networks}  # fmt: skip
+        if not set(entries) <= set(INT8):
+            raise ValueError(f"unknown networks {sorted(set(entries) - set(INT8))}")
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{folder / CONFIG}: not a valid int8 section ({e})") from None
+    models = {}
+    for name, (file, digest) in entries.items():
+        f = folder / file
+        if not f.is_file():
+            raise FileNotFoundError(f"{f}: int8 network not found ({CONFIG} has an int8 section)")
+        if sha256(folder / FLOAT_WEIGHTS[name]) != digest:
+            raise ValueError(
+                f"{f}: made from other weights than {FLOAT_WEIGHTS[name]}; run "
+                "icarus-vision quantize-detector again"
+            )
+        models[name] = f.read_bytes()
+        try:
+            onnx.load_model_from_string(models[name])
+        except Exception as e:  # noqa: BLE001 - protobuf's decode errors
+            raise ValueError(f"{f}: not an ONNX model ({type(e).__name__})") from None
+    return models
 
 
 def onnx_bytes(module: torch.nn.Module, inputs: tuple, **names) -> bytes:

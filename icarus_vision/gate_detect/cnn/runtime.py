@@ -16,7 +16,7 @@ from torch import nn
 class OnnxRuntimeNet:
     """A network exported to ONNX and run by ONNX Runtime on the CPU: :meth:`run` takes and
     returns numpy arrays; called, it works like the module it came from (torch tensors in, one
-    float32 torch tensor out).
+    float32 torch tensor out). Its ``onnx`` is the ONNX model it runs (bytes).
 
     Args:
         module: the network (exported once, here, in eval mode).
@@ -25,20 +25,39 @@ class OnnxRuntimeNet:
     """
 
     def __init__(self, module: nn.Module, example: tuple[torch.Tensor, ...], threads: int | None):
-        import onnxruntime as ort
-
         from icarus_vision.gate_detect.cnn.checkpoint import onnx_bytes
 
-        self._names = [f"input{i}" for i in range(len(example))]
-        model = onnx_bytes(
-            module, example, input_names=self._names, output_names=["output"],
-            dynamic_axes={n: {0: "n"} for n in [*self._names, "output"]},
+        names = [f"input{i}" for i in range(len(example))]
+        self.onnx = onnx_bytes(
+            module, example, input_names=names, output_names=["output"],
+            dynamic_axes={n: {0: "n"} for n in [*names, "output"]},
         )  # fmt: skip
+        self._start(self.onnx, threads)
+
+    @classmethod
+    def from_onnx(
+        cls, model: bytes, threads: int | None, source: str = "ONNX model"
+    ) -> OnnxRuntimeNet:
+        """A network from an ONNX model's bytes (an int8 copy: ``quantize.py``); one that ONNX
+        Runtime cannot load is a ValueError naming ``source``."""
+        net = cls.__new__(cls)
+        net.onnx = model
+        try:
+            net._start(model, threads)
+        except Exception as e:  # noqa: BLE001 - ONNX Runtime raises its own exception types
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise ValueError(f"{source}: not a model ONNX Runtime can run ({msg})") from None
+        return net
+
+    def _start(self, model: bytes, threads: int | None) -> None:
+        import onnxruntime as ort
+
         opts = ort.SessionOptions()
         if threads is not None:
             opts.intra_op_num_threads = threads
             opts.inter_op_num_threads = 1
         self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+        self._names = [i.name for i in self._session.get_inputs()]
 
     def run(self, *inputs: np.ndarray) -> np.ndarray:
         """float32 C-contiguous arrays in (no copy), the float32 output out."""

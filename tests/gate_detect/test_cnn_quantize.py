@@ -1,0 +1,169 @@
+"""Int8 copies of the detector's networks: quantize-detector, loading them, choosing the backend."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import save_file
+from typer.testing import CliRunner
+
+import icarus_vision.gate_detect.cnn as cnn
+from icarus_vision.cli import app
+from icarus_vision.gate_detect.cnn import CnnDetector, OnnxRuntimeNet
+from icarus_vision.gate_detect.cnn.checkpoint import (
+    INT8,
+    load_checkpoint,
+    load_refiner,
+    save_checkpoint,
+)
+from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig
+from icarus_vision.gate_detect.cnn.model import CornerNet
+from icarus_vision.gate_detect.cnn.quantize import calibration_inputs, layer_nodes
+from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
+from icarus_vision.gate_detect.cnn.zoom import ZoomConfig, ZoomNet
+
+from .conftest import TINY_MODEL
+
+runner = CliRunner()
+
+
+def _checkpoint(folder):
+    """Untrained tiny networks whose every stage has work on the tiny dataset's frames."""
+    torch.manual_seed(1)
+    corner = CornerNet(TINY_MODEL).eval()
+    refiner = RefineNet(RefineConfig(patch=40, margin=8)).eval()
+    zoom = ZoomNet(ZoomConfig(patch=24, widths=(4, 8, 8, 8), hidden=16, min_side_px=4.0)).eval()
+    with torch.no_grad():  # centre peaks regressing a square; a refiner that believes them all
+        corner.out.bias[0] = 0.0
+        corner.out.bias[7:15] = torch.tensor([-0.5, -0.5, 0.5, -0.5, 0.5, 0.5, -0.5, 0.5])
+        refiner.out.bias[0] = 5.0
+    return save_checkpoint(folder, corner, DecodeConfig(centre_threshold=0.0), {}, refiner,
+                           {}, zoom, {})  # fmt: skip
+
+
+def _quantize(src, data, out, *extra):
+    args = ["quantize-detector", "--detector", f"cnn:{src}", "--data", str(data), "--out",
+            str(out), *extra]  # fmt: skip
+    return runner.invoke(app, args)
+
+
+@pytest.fixture(scope="module")
+def quantized(tiny_dataset, tmp_path_factory):
+    root = tmp_path_factory.mktemp("quantized")
+    src = _checkpoint(root / "float")
+    res = _quantize(src, tiny_dataset, root / "int8", "--images", "3", "--seed", "2")
+    assert res.exit_code == 0, res.output
+    return src, root / "int8"
+
+
+def test_quantize_detector_writes_a_checkpoint_with_int8_networks(quantized, tiny_dataset):
+    src, out = quantized
+    assert not any((src / f).exists() for f in INT8.values())  # the source is left as it was
+    meta = json.loads((out / "detector.json").read_text())["int8"]
+    assert sorted(meta["networks"]) == ["model", "refiner", "zoom"]
+    assert meta["calibration"] == {"data": [str(tiny_dataset)], "split": "val", "images": 3,
+                                   "seed": 2}  # fmt: skip
+    # the first and output layers stay float32 (this corner network has no stem)
+    assert meta["float_layers"] == {"model": ["enc1.0", "lat1", "up1", "out"],
+                                    "refiner": ["features.0", "out"], "zoom": ["features.0", "head.3"]}  # fmt: skip
+    for name, file in INT8.items():
+        assert (out / file).is_file() and meta["networks"][name]["file"] == file
+    det = CnnDetector.load(out, backend="int8")
+    assert all(isinstance(n, OnnxRuntimeNet) for n in (det.model, det.refiner, det.zoom))
+
+
+def test_int8_networks_read_as_the_float_ones(quantized, tiny_dataset):
+    _, out = quantized
+    images = [read_rgb(f) for f in load_split(tiny_dataset, "val", None, None).files]
+    inputs = calibration_inputs(CnnDetector.load(out, backend="onnxruntime"), images)
+    float_det, int8_det = (CnnDetector.load(out, backend=b) for b in ("onnxruntime", "int8"))
+    for name in ("model", "refiner", "zoom"):
+        a, b = getattr(float_det, name), getattr(int8_det, name)
+        for batch in inputs[name]:
+            x, y = a.run(*batch), b.run(*batch)
+            assert not np.array_equal(x, y)  # it is another network...
+            # ... within a few per cent of the outputs' range (8-bit steps, several layers)
+            assert np.abs(x - y).max() <= 0.05 * (np.ptp(x) + 1e-6), name
+
+
+def test_same_seed_same_int8_networks_and_another_seed_other_frames(quantized, tiny_dataset,
+                                                                    tmp_path):  # fmt: skip
+    src, out = quantized
+    assert (
+        _quantize(src, tiny_dataset, tmp_path / "a", "--images", "3", "--seed", "2").exit_code == 0
+    )
+    for file in INT8.values():
+        assert (tmp_path / "a" / file).read_bytes() == (out / file).read_bytes()
+    assert (
+        _quantize(src, tiny_dataset, tmp_path / "b", "--images", "3", "--seed", "9").exit_code == 0
+    )
+    assert (tmp_path / "b" / INT8["model"]).read_bytes() != (out / INT8["model"]).read_bytes()
+
+
+def test_auto_runs_int8_only_where_the_cpu_has_8_bit_dot_products(quantized, monkeypatch):
+    _, out = quantized
+    monkeypatch.setattr(cnn, "native_int8", lambda: True)
+    assert CnnDetector.load(out).backend == "int8"
+    assert CnnDetector.load(out, bf16=True).backend == "torch"
+    monkeypatch.setattr(cnn, "native_int8", lambda: False)
+    assert CnnDetector.load(out).backend == "onnxruntime"
+    src, _ = quantized
+    monkeypatch.setattr(cnn, "native_int8", lambda: True)  # no int8 copies: float32
+    assert CnnDetector.load(src).backend == "onnxruntime"
+    with pytest.raises(ValueError, match="quantize-detector"):
+        CnnDetector.load(src, backend="int8")
+    with pytest.raises(ValueError, match="bf16"):
+        CnnDetector.load(out, backend="int8", bf16=True)
+
+
+def test_stale_or_corrupt_int8_networks_name_the_file(quantized, tmp_path):
+    _, out = quantized
+    folder = tmp_path / "ck"
+    folder.mkdir()
+    for f in out.iterdir():
+        (folder / f.name).write_bytes(f.read_bytes())
+    model, decode, _ = load_checkpoint(folder)
+
+    state = {k: v + 1.0 if v.is_floating_point() else v for k, v in model.state_dict().items()}
+    save_file(state, str(folder / "model.safetensors"))  # new weights, the old int8 copies
+    with pytest.raises(ValueError, match=r"model\.int8\.onnx.*other weights"):
+        CnnDetector.load(folder)
+    (folder / "model.safetensors").write_bytes((out / "model.safetensors").read_bytes())
+    (folder / "zoom.int8.onnx").write_bytes(b"garbage")
+    with pytest.raises(ValueError, match=r"zoom\.int8\.onnx.*not an ONNX model"):
+        CnnDetector.load(folder)
+    (folder / "zoom.int8.onnx").unlink()
+    with pytest.raises(FileNotFoundError, match=r"zoom\.int8\.onnx"):
+        CnnDetector.load(folder)
+    # saving the checkpoint again drops its int8 copies, which no longer match
+    save_checkpoint(folder, model, replace(decode, centre_threshold=0.5))
+    assert not any((folder / f).exists() for f in INT8.values())
+    assert "int8" not in json.loads((folder / "detector.json").read_text())
+
+
+def test_bad_calibration_requests_give_one_line_errors(quantized, tiny_dataset, tmp_path):
+    src, _ = quantized
+    res = _quantize(src, tiny_dataset, tmp_path / "x", "--detector", "opencv")
+    assert res.exit_code == 1 and "cnn or cnn:PATH" in res.output
+    res = _quantize(src, tmp_path / "nowhere", tmp_path / "x")
+    assert res.exit_code == 1 and "nowhere" in res.output
+    # a corner network that finds nothing leaves the refiner nothing to read
+    quiet = tmp_path / "quiet"
+    model, _, meta = load_checkpoint(src)
+    save_checkpoint(quiet, model, DecodeConfig(centre_threshold=1.0), {}, load_refiner(src, meta))
+    res = _quantize(quiet, tiny_dataset, tmp_path / "x")
+    assert res.exit_code == 1 and "the refiner read nothing on 4 calibration frames" in res.output
+
+
+def test_float_layers_name_nodes_of_the_exported_networks(quantized):
+    src, _ = quantized
+    det = CnnDetector.load(src, backend="onnxruntime")
+    nodes = layer_nodes(det.model.onnx, ["enc1.0", "out"])  # its nodes: convolution and ReLU
+    assert nodes == ["/enc1/enc1.0/enc1.0.0/Conv", "/enc1/enc1.0/enc1.0.2/Relu", "/out/Conv"]
+    with pytest.raises(ValueError, match="no ONNX node belongs to module 'nothing'"):
+        layer_nodes(det.model.onnx, ["nothing"])
