@@ -11,9 +11,11 @@ For each detector: the test-split figures of ``eval_detector`` (precision, recal
 PCK, by distance, and their 95 % bootstrap intervals over the test images) and a latency run:
 ``detect`` on the first 50 test frames, 5 passes, on one thread, reporting the median and 95th
 percentile ms per frame; for a CNN, also
-``--backend-rounds`` alternating runs on each backend, PyTorch and ONNX Runtime (the median of
-their medians). Prints a table and one JSON object (also written to ``--json``). The machine's 1-minute load average is recorded:
-timings on a busy machine are slower than on an idle core.
+``--backend-rounds`` alternating runs on each backend, PyTorch (in bfloat16 where the CPU has it),
+ONNX Runtime in float32 and, where the checkpoint has int8 copies (``quantize-detector``), ONNX
+Runtime in int8 (the median of their medians); ``backend`` is the one ``auto`` chose. Prints a
+table and one JSON object (also written to ``--json``). The machine's 1-minute load average is
+recorded: timings on a busy machine are slower than on an idle core.
 """
 
 from __future__ import annotations
@@ -73,7 +75,7 @@ def main(argv: list[str] | None = None) -> dict:
         "--backend-rounds",
         type=int,
         default=3,
-        help="Alternating latency runs of each CNN backend (torch, onnxruntime).",
+        help="Alternating latency runs of each CNN backend (torch, onnxruntime, int8).",
     )
     args = ap.parse_args(argv)
     if not (args.data / "annotations" / "test.json").is_file():
@@ -83,9 +85,16 @@ def main(argv: list[str] | None = None) -> dict:
         r = eval_detector(args.data, spec, limit=args.limit)
         keep = ("images", "gates", "min_gate_px", "precision", "recall", "corner_error_px", "pck",
                 "confidence", "ms_per_frame", "by_distance", "by_size")  # fmt: skip
+        keep += ("backend",)
         out["detectors"][spec] = {k: r[k] for k in keep} | {"latency": latency(spec, args.data)}
-        if spec.split(":")[0] == "cnn":  # both backends, alternating (the machine's load drifts)
-            runs = {b: [] for b in ("torch", "onnxruntime")}
+        if spec.split(":")[0] == "cnn":  # every backend, alternating (the machine's load drifts)
+            backends = ["torch", "onnxruntime"]
+            try:
+                make(spec, "int8")
+                backends.append("int8")
+            except ValueError:  # no int8 copies in this checkpoint
+                pass
+            runs = {b: [] for b in backends}
             for _ in range(args.backend_rounds):
                 for b in runs:
                     runs[b].append(latency(spec, args.data, backend=b)["median_ms"])
@@ -100,7 +109,8 @@ def main(argv: list[str] | None = None) -> dict:
              r["corner_error_px"]["mean"], r["pck"]["2px"], r["pck"]["5px"]]  # fmt: skip
         cells = " ".join(f"{'-' if x is None else f'{x:.3f}':>6}" for x in f)
         lat = r["latency"]
-        print(f"{spec:10} {r['gates']:>6} {cells} {lat['median_ms']:>7.2f} {lat['p95_ms']:>7.2f}")
+        print(f"{spec:10} {r['gates']:>6} {cells} {lat['median_ms']:>7.2f} {lat['p95_ms']:>7.2f}"
+              + (f"  ({r['backend']})" if r["backend"] else ""))  # fmt: skip
         ci = r["confidence"]
         print("  95 % intervals (bootstrap over images): " + ", ".join(
             f"{k} {v[0]:.4f}-{v[1]:.4f}" for k, v in ci.items() if isinstance(v, list)))  # fmt: skip
