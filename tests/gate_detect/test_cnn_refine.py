@@ -297,7 +297,7 @@ def _first_stage(tmp_path):
     return save_checkpoint(tmp_path / "first", CornerNet(TINY_MODEL).eval(), DecodeConfig())
 
 
-def test_train_refiner_saves_on_ctrl_c_and_resumes_exactly(tiny_dataset, tmp_path):
+def test_train_refiner_saves_on_ctrl_c_and_resumes_exactly(tiny_dataset, tmp_path, monkeypatch):
     from safetensors.torch import load_file
 
     first = _first_stage(tmp_path)
@@ -313,7 +313,11 @@ def test_train_refiner_saves_on_ctrl_c_and_resumes_exactly(tiny_dataset, tmp_pat
                          log=interrupt, **kw)  # fmt: skip
     with pytest.raises(ValueError, match="--resume"):
         rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=2, config=cfg, **kw)
+    # the resumed run reads the training candidates it saved; only the val split's are found
+    collected, collect = [], rt.collect
+    monkeypatch.setattr(rt, "collect", lambda *a, **k: collected.append(a[1]) or collect(*a, **k))
     rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=2, resume=True, progress=False)
+    assert [len(split.files) for split in collected] == [4]  # the val split
     rt.train_refiner(first, tiny_dataset, tmp_path / "b", epochs=2, config=cfg, **kw)
     for kept in ("last", "best"):
         a, b = (load_file(tmp_path / r / kept / "refiner.safetensors") for r in "ab")
@@ -325,6 +329,20 @@ def test_train_refiner_saves_on_ctrl_c_and_resumes_exactly(tiny_dataset, tmp_pat
     det = make_detector(f"cnn:{tmp_path / 'a' / 'best'}")
     assert det.refiner is not None
     assert isinstance(det.detect(np.zeros((120, 160, 3), np.uint8)), list)
+
+
+def test_saved_candidates_are_read_back_only_for_the_same_key(tmp_path):
+    cands = rt.Candidates(np.arange(3), np.random.rand(3, 4, 2), np.full((3, 4, 2), np.nan),
+                          np.random.rand(3, 3).astype(np.float32), [])  # fmt: skip
+    path = tmp_path / "c.npz"
+    rt.save_candidates(path, cands, {"data": ["x"], "images": 3})
+    back = rt.load_candidates(path, {"images": 3, "data": ["x"]})
+    assert back is not None and np.array_equal(back.quads, cands.quads)
+    assert np.array_equal(back.targets, cands.targets, equal_nan=True)
+    assert rt.load_candidates(path, {"data": ["y"], "images": 3}) is None  # other data
+    path.write_bytes(b"garbage")
+    assert rt.load_candidates(path, {"data": ["x"], "images": 3}) is None
+    assert rt.load_candidates(tmp_path / "missing.npz", {}) is None
 
 
 def test_jittered_truth_and_candidates_of_a_split(tiny_dataset):

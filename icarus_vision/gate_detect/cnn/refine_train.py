@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import hashlib
 import itertools
+import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -63,6 +65,8 @@ JITTER = (0.02, 0.15)
 range, as a fraction of the gate's side."""
 STATE = "refine_state.pt"
 REFINER_ONNX = "refiner.onnx"
+CANDIDATE_CACHE = "candidates.npz"
+"""The training split's labelled candidates, kept so that ``--resume`` need not find them again."""
 
 
 @dataclass
@@ -160,6 +164,37 @@ def collect(
         scores.append(stage_scores(gates)[ok])
     return Candidates(np.concatenate(idx), np.concatenate(quads), np.concatenate(targets),
                       np.concatenate(scores), per_image)  # fmt: skip
+
+
+def _weights_digest(net: torch.nn.Module) -> str:
+    """SHA-256 of a network's weights (names, shapes and values)."""
+    h = hashlib.sha256()
+    for name, t in sorted(net.state_dict().items()):
+        h.update(name.encode())
+        h.update(str(tuple(t.shape)).encode())
+        h.update(t.detach().contiguous().cpu().numpy().tobytes())
+    return h.hexdigest()
+
+
+def save_candidates(path: Path, cands: Candidates, key: dict) -> None:
+    """Write the arrays of ``cands`` (not ``per_image``) and what they were collected from
+    (``key``, JSON) to ``path`` atomically."""
+    from icarus_vision.fileio import atomic_write_npz
+
+    atomic_write_npz(path, image=cands.image, quads=cands.quads, targets=cands.targets,
+                     scores=cands.scores, key=np.array(json.dumps(key, sort_keys=True)))  # fmt: skip
+
+
+def load_candidates(path: Path, key: dict) -> Candidates | None:
+    """The candidates saved at ``path`` if they were collected from ``key`` (else, or if the
+    file is missing or unreadable, None: collect them again)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["key"]) != json.dumps(key, sort_keys=True):
+                return None
+            return Candidates(z["image"], z["quads"], z["targets"], z["scores"], [])
+    except (OSError, ValueError, KeyError):
+        return None
 
 
 def jittered_truth(split: Split, rng: np.random.Generator, min_side_px: float = 8.0):
@@ -434,8 +469,10 @@ def train_refiner(
 
     Output folder: ``best/`` and ``last/`` are complete detector checkpoints (the corner network
     copied, its decoding set to :data:`CANDIDATES`, plus the refiner); ``last/`` also holds
-    ``refine_state.pt`` (what ``resume`` reads); ``refiner.onnx`` (best), ``history.json`` and
-    TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's shuffle and augmentation
+    ``refine_state.pt`` (what ``resume`` reads); ``candidates.npz`` (the training split's
+    candidates: ``resume`` reads them instead of running the corner network over every
+    training image again, unless the data or the network differ); ``refiner.onnx`` (best),
+    ``history.json`` and TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's shuffle and augmentation
     depend on (seed, epoch) alone, so a resumed run trains as one never interrupted.
 
     Args:
@@ -516,7 +553,15 @@ def train_refiner(
         read_at = input_sizes(size, (cfg.candidate_scale,))[0]
         read_at = None if read_at == size else read_at
         cand_cfg = replace(CANDIDATES, nms_iou=cfg.candidate_iou)
-        cands = collect(first, train, cand_cfg, read_at)
+        key = {"data": [str(d) for d in dirs], "images": len(train.files), "limit": cfg.limit,
+               "read_at": read_at, "decode": asdict(cand_cfg),
+               "corner_network": _weights_digest(corner_net)}  # fmt: skip
+        cands = load_candidates(out / CANDIDATE_CACHE, key) if resume else None
+        if cands is None:
+            cands = collect(first, train, cand_cfg, read_at)
+            save_candidates(out / CANDIDATE_CACHE, cands, key)
+        elif log is not None:
+            log(f"training candidates read from {out / CANDIDATE_CACHE}")
         val_cands = collect(first, val, cand_cfg, read_at)
     rcfg = replace(net.cfg, threshold=RefineConfig.threshold, snap=0.0)  # tuned at the end
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
