@@ -54,6 +54,13 @@ def train_refiner_cmd(
         help="A new run's training candidates: the corner network reads their frames at this "
         "fraction of the camera's size (0.8: 256x192, as the shipped detector reads them).",
     ),
+    init: Path = typer.Option(
+        None,
+        help="Start a new run from this checkpoint's refiner (its architecture: --patch, "
+        "--widths, --hidden and --square-hfov are then not used), e.g. to fine-tune it on new "
+        "data with a lower --lr.",
+    ),
+    lr: float = typer.Option(2e-3, min=0.0, help="Peak learning rate of a new run (AdamW)."),
     candidate_iou: float = typer.Option(
         0.5,
         min=0.01,
@@ -80,10 +87,11 @@ def train_refiner_cmd(
     result = train_refiner(
         SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
         resume=resume,
-        config=RefineTrainConfig(candidate_scale=candidate_scale, candidate_iou=candidate_iou),
+        config=RefineTrainConfig(candidate_scale=candidate_scale, candidate_iou=candidate_iou,
+                                 lr=lr),
         refine_config=RefineConfig(
             patch=patch, widths=parse_widths(widths, 3), hidden=hidden, square_hfov_deg=square_hfov
         ),
-        log=lambda s: console.print(s, highlight=False), val_data=val or None,
+        log=lambda s: console.print(s, highlight=False), val_data=val or None, init=init,
     )  # fmt: skip
     print_best(result.best_epoch, result.best_metrics, out, "best/, last/, refiner.onnx")

@@ -331,6 +331,27 @@ def test_train_refiner_saves_on_ctrl_c_and_resumes_exactly(tiny_dataset, tmp_pat
     assert isinstance(det.detect(np.zeros((120, 160, 3), np.uint8)), list)
 
 
+def test_a_new_run_can_start_from_a_checkpoints_refiner(tiny_dataset, tmp_path):
+    from safetensors.torch import load_file
+
+    first = _first_stage(tmp_path)
+    init = save_checkpoint(
+        tmp_path / "init", CornerNet(TINY_MODEL), DecodeConfig(), {}, _refiner(4)
+    )
+    cfg = rt.RefineTrainConfig(batch_size=16, tune=False, lr=0.0)  # lr 0: the weights stay
+    rt.train_refiner(first, tiny_dataset, tmp_path / "a", epochs=1, config=cfg, init=init,
+                     progress=False)  # fmt: skip
+    a = load_file(tmp_path / "a" / "best" / "refiner.safetensors")
+    b = load_file(init / "refiner.safetensors")
+    learned = [k for k in a if "running" not in k and "num_batches" not in k]
+    assert learned and all(torch.equal(a[k], b[k]) for k in learned)
+    meta = json.loads((tmp_path / "a" / "best" / "detector.json").read_text())
+    assert meta["refine"]["patch"] == CFG.patch and meta["refine_training"]["init"] == str(init)
+    with pytest.raises(ValueError, match="no refiner"):
+        rt.train_refiner(first, tiny_dataset, tmp_path / "b", epochs=1, config=cfg, init=first,
+                         progress=False)  # fmt: skip
+
+
 def test_saved_candidates_are_read_back_only_for_the_same_key(tmp_path):
     cands = rt.Candidates(np.arange(3), np.random.rand(3, 4, 2), np.full((3, 4, 2), np.nan),
                           np.random.rand(3, 3).astype(np.float32), [])  # fmt: skip

@@ -464,6 +464,7 @@ def train_refiner(
     progress: bool = True,
     log: Callable[[str], None] | None = None,
     val_data: list[str | Path] | None = None,
+    init: str | Path | None = None,
 ) -> RefineResult:
     """Train (or resume training) the second stage of a trained corner network.
 
@@ -494,6 +495,8 @@ def train_refiner(
         val_data: datasets whose val splits, together, validate every epoch and tune (default:
             the first of ``data_dir``). A bigger val set makes both choices less noisy; a
             finished run resumed with other ``val_data`` is tuned again on them.
+        init: a checkpoint whose refiner a new run starts from (fine-tuning, for example on new
+            data with a lower ``config.lr``); its architecture replaces ``refine_config``.
 
     Raises:
         FileNotFoundError / ValueError: bad detector or dataset, or OUT/last present without
@@ -525,6 +528,12 @@ def train_refiner(
     corner_net, _, meta = load_checkpoint(last_dir if resume else detector)
     torch.manual_seed(cfg.seed)
     net = RefineNet(refine_config or RefineConfig())
+    if init is not None and not resume:
+        _, _, init_meta = load_checkpoint(init)
+        net = load_refiner(init, init_meta)
+        if net is None:
+            raise ValueError(f"{init}: no refiner to start from")
+        net.train()
     if resume:
         net = load_refiner(last_dir, meta)
         stored = meta.get("refine_training", {}).get("config", {})
@@ -575,6 +584,10 @@ def train_refiner(
         start, history, best, _ = load_state(last_dir / STATE, opt, sched)
     info = {"detector": str(detector), "data": [str(d) for d in dirs],
             "val_data": [str(d) for d in val_dirs], "config": asdict(cfg)}  # fmt: skip
+    if resume and "init" in meta.get("refine_training", {}):
+        info["init"] = meta["refine_training"]["init"]
+    elif init is not None:
+        info["init"] = str(init)
     first_info = meta.get("training", {})
 
     def save(folder: Path, epoch: int, extra: dict | None = None) -> None:
