@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import functools
 import sys
+from contextlib import ExitStack
 
 import typer
 from rich.console import Console
 from rich.markup import escape
+from rich.progress import Progress
 
 app = typer.Typer(
     help="icarus-vision: vision-based autonomous drone racing.",
@@ -21,6 +23,22 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
+
+
+def progress_reporter(stack: ExitStack, columns: tuple, transient: bool = False):
+    """A ``progress(done, total)`` callback for the library's long work: a rich progress bar
+    with ``columns``, entered on ``stack`` at the first report (so that bad input fails before
+    any output); the work done by then counts from the start."""
+    state: dict = {}
+
+    def progress(done: int, total: int) -> None:
+        if not state:
+            bar = stack.enter_context(Progress(*columns, console=console, transient=transient))
+            state["bar"], state["task"] = bar, bar.add_task("work", total=total, completed=done)
+        else:
+            state["bar"].update(state["task"], completed=done)
+
+    return progress
 
 
 def user_errors(fn):

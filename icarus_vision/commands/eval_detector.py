@@ -7,10 +7,10 @@ from pathlib import Path
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from icarus_vision.cli import app, console, user_errors
+from icarus_vision.cli import app, console, progress_reporter, user_errors
 
 
 def _fmt(x) -> str:
@@ -52,17 +52,9 @@ def eval_detector_cmd(
     from icarus_vision.gate_detect.evaluate import eval_detector
 
     with ExitStack() as stack:
-        bar = task = None
-
-        def progress(done: int, total: int) -> None:
-            nonlocal bar, task
-            if bar is None:
-                cols = (TextColumn("[bold]eval-detector"), BarColumn(), MofNCompleteColumn(),
-                        TimeElapsedColumn())  # fmt: skip
-                bar = stack.enter_context(Progress(*cols, console=console, transient=True))
-                task = bar.add_task("images", total=total)
-            bar.update(task, completed=done)
-
+        cols = (TextColumn("[bold]eval-detector"), BarColumn(), MofNCompleteColumn(),
+                TimeElapsedColumn())  # fmt: skip
+        progress = progress_reporter(stack, cols, transient=True)
         r = eval_detector(data, detector, json_path, error_model, min_gate_px, limit=limit,
                           progress=progress, examples_path=examples,
                           examples=num_examples, seed=seed, resamples=resamples)  # fmt: skip

@@ -10,7 +10,6 @@ from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
-    Progress,
     ProgressColumn,
     TextColumn,
     TimeElapsedColumn,
@@ -18,7 +17,7 @@ from rich.progress import (
 )
 from rich.text import Text
 
-from icarus_vision.cli import app, console, user_errors
+from icarus_vision.cli import app, console, progress_reporter, user_errors
 
 
 class _ImagesPerSecond(ProgressColumn):
@@ -61,17 +60,9 @@ def gen_dataset_cmd(
         TimeRemainingColumn(),
     )
     with ExitStack() as stack:
-        bar = task = None
-
-        def progress(done: int, total: int) -> None:
-            nonlocal bar, task
-            if bar is None:  # started on the first report: bad input fails before any output
-                bar = stack.enter_context(Progress(*columns, console=console))
-                # The images found complete are counted from the start, not towards the speed.
-                task = bar.add_task("images", total=total, completed=done)
-            else:
-                bar.update(task, completed=done)
-
+        # started on the first report; the images found complete count from the start, not
+        # towards the speed
+        progress = progress_reporter(stack, columns)
         result = generate_dataset(
             recipe, out, num_images, workers, seed, force, progress, renderer=renderer
         )

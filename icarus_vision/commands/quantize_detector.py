@@ -7,9 +7,9 @@ from pathlib import Path
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-from icarus_vision.cli import app, console, user_errors
+from icarus_vision.cli import app, console, progress_reporter, user_errors
 
 
 def checkpoint_of(spec: str) -> str | None:
@@ -45,17 +45,9 @@ def quantize_detector_cmd(
     from icarus_vision.gate_detect.cnn.quantize import quantize_detector
 
     with ExitStack() as stack:
-        bar = task = None
-
-        def progress(done: int, total: int) -> None:
-            nonlocal bar, task
-            if bar is None:
-                cols = (TextColumn("[bold]calibrating"), BarColumn(), MofNCompleteColumn(),
-                        TimeElapsedColumn())  # fmt: skip
-                bar = stack.enter_context(Progress(*cols, console=console, transient=True))
-                task = bar.add_task("frames", total=total)
-            bar.update(task, completed=done)
-
+        cols = (TextColumn("[bold]calibrating"), BarColumn(), MofNCompleteColumn(),
+                TimeElapsedColumn())  # fmt: skip
+        progress = progress_reporter(stack, cols, transient=True)
         record = quantize_detector(checkpoint_of(detector), data, out, images, split, seed,
                                    progress)  # fmt: skip
     nets = ", ".join(record["networks"])
