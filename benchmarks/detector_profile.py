@@ -2,16 +2,17 @@
 
 Usage::
 
-    python benchmarks/detector_profile.py [--detector cnn[:PATH]] [--data datasets/gates-v2-test]
-                                          [--frames 200] [--runs 3] [--json PATH]
+    python benchmarks/detector_profile.py [--detector cnn[:PATH]] [--backend auto|torch|onnxruntime|int8]
+                                          [--data datasets/gates-v2-test] [--frames 200] [--runs 3]
+                                          [--json PATH]
 
 Runs the stages of ``CnnDetector.detect`` one by one on the first ``--frames`` test frames (one
 thread, after a warm-up pass), ``--runs`` times, and reports the median over runs of the mean ms
 per frame of each stage:
 
 - ``resize``: the frame to the corner network's input (``model.network_input``);
-- ``corner_network``: the corner network (its backend: ONNX Runtime, or PyTorch in bfloat16 on
-  CPUs with bfloat16 arithmetic);
+- ``corner_network``: the corner network (on ``--backend``; ``auto``: int8 where the checkpoint
+  has int8 copies and the CPU has VNNI or AMX, else float32 ONNX Runtime);
 - ``decode``: its maps to candidate gates (``decode.decode``);
 - ``refiner_network``: the refiner's network calls, all readings of all candidates;
 - ``refiner_rest``: the rest of ``refine.verdicts`` (patch warping, geometry, corners back to
@@ -160,6 +161,7 @@ def cold_call_us(det, repeats: int = 300) -> dict:
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--detector", default="cnn")
+    ap.add_argument("--backend", default="auto", help="auto, torch, onnxruntime or int8")
     ap.add_argument("--data", type=Path, default=DATA)
     ap.add_argument("--frames", type=int, default=200)
     ap.add_argument("--runs", type=int, default=3)
@@ -167,7 +169,12 @@ def main(argv: list[str] | None = None) -> dict:
     args = ap.parse_args(argv)
     if not (args.data / "annotations" / "test.json").is_file():
         sys.exit(f"{args.data}: no dataset; generate it first (see benchmarks/detector.py)")
-    det = make_detector(args.detector)
+    if args.backend == "auto":
+        det = make_detector(args.detector)
+    else:
+        from icarus_vision.gate_detect.cnn import CnnDetector
+
+        det = CnnDetector.load(args.detector.partition(":")[2] or None, backend=args.backend)
     if getattr(det, "refiner", None) is None:
         sys.exit(f"{args.detector}: not a CNN detector with a refiner")
     images = [read_rgb(f) for f in load_split(args.data, "test", None, args.frames).files]
