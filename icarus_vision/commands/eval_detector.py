@@ -73,7 +73,8 @@ def eval_detector_cmd(
                  "median px", "pck_2px": "PCK@2", "pck_5px": "PCK@5"}  # fmt: skip
         spans = ", ".join(f"{v} {ci[k][0]:.3f}-{ci[k][1]:.3f}" for k, v in names.items() if ci[k])
         console.print(f"95 % intervals (bootstrap over images): {spans}", highlight=False)
-    console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core)", highlight=False)
+    backend = f", {r['backend']}" if r["backend"] else ""
+    console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core{backend})", highlight=False)
     if r["error_model_path"]:
         console.print(f"error model written to {escape(r['error_model_path'])}", highlight=False)
     if r["examples_path"]:

@@ -121,6 +121,16 @@ def test_auto_runs_int8_only_where_the_cpu_has_8_bit_dot_products(quantized, mon
         CnnDetector.load(out, backend="int8", bf16=True)
 
 
+def test_eval_detector_reports_the_backend_it_ran(quantized, tiny_dataset, tmp_path, monkeypatch):
+    _, out = quantized
+    monkeypatch.setattr(cnn, "native_int8", lambda: True)
+    res = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--detector",
+                              f"cnn:{out}", "--json", str(tmp_path / "r.json"), "--resamples", "0"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "r.json").read_text())["backend"] == "int8"
+    assert "(one core, int8)" in res.output
+
+
 def test_stale_or_corrupt_int8_networks_name_the_file(quantized, tmp_path):
     _, out = quantized
     folder = tmp_path / "ck"

@@ -30,6 +30,7 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
     assert r.exit_code == 0, r.output
     report = json.loads(out.read_text())
     assert report["detector"] == "opencv" and report["confidence"]["resamples"] == 200
+    assert report["backend"] is None  # a CNN's: what ran its networks
     assert "95 % intervals" in r.output
     assert "distance_m" in json.loads(em.read_text())
     import cv2
