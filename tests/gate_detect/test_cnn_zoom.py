@@ -194,12 +194,12 @@ def test_missing_or_corrupt_zoom_weights_name_the_file(tmp_path):
         make_detector(f"cnn:{tmp_path / 'ck'}")
 
 
-def _labelled_detections(detector, split, progress=False, what=""):
-    """Stands in for the detector: each labelled gate found a little off (seeded)."""
+def _labelled_detections(detector, split, progress=False, what="", start=0):
+    """Stands in for the detector: each labelled gate found a little off (seeded per image)."""
     from icarus_vision.gate_detect.cnn.data import read_rgb
 
-    rng = np.random.default_rng(0)
-    for i, path in enumerate(split.files):
+    for i, path in enumerate(split.files[start:], start):
+        rng = np.random.default_rng(i)
         found = [(g.corners + rng.normal(size=(4, 2)), 0.9) for g in split.gates[i]
                  if np.isfinite(g.corners).all()]  # fmt: skip
         yield i, read_rgb(path), found
@@ -244,6 +244,39 @@ def test_train_zoom_saves_on_ctrl_c_resumes_exactly_and_tunes(tiny_dataset, tmp_
     assert (tmp_path / "a" / "zoom.onnx").is_file() and (tmp_path / "a" / "examples.npz").is_file()
     assert [h["epoch"] for h in json.loads((tmp_path / "a" / "history.json").read_text())] == [1, 2]
     assert make_detector(f"cnn:{tmp_path / 'a' / 'best'}").zoom is not None
+
+
+def test_train_zoom_interrupted_while_cutting_patches_continues_from_its_parts(
+    tiny_dataset, tmp_path, monkeypatch
+):
+    monkeypatch.setattr(zt, "CHUNK", 3)  # 8 training images: parts of 3, 3 and 2
+    seen = []
+
+    def detections(detector, split, progress=False, what="", start=0):
+        for item in _labelled_detections(detector, split, progress, what, start):
+            if what.startswith("train"):
+                seen.append(item[0])
+                if len(seen) == 5 and interrupting:  # in the second part
+                    raise KeyboardInterrupt
+            yield item
+
+    monkeypatch.setattr(zt, "detections", detections)
+    det = _detector(tmp_path)
+    kw = {"zoom_config": CFG, "progress": False, "epochs": 1,
+          "config": zt.ZoomTrainConfig(batch_size=32, min_gate_px=8.0)}  # fmt: skip
+    interrupting = True
+    with pytest.raises(KeyboardInterrupt):
+        zt.train_zoom(det, tiny_dataset, tmp_path / "a", **kw)
+    assert sorted(p.name for p in (tmp_path / "a" / zt.PARTS / "0").iterdir()) == ["00000.npz"]
+    interrupting, seen[:] = False, []
+    zt.train_zoom(det, tiny_dataset, tmp_path / "a", **kw)  # the same command again
+    assert seen == [3, 4, 5, 6, 7]  # the first part was read, not cut again
+    assert not (tmp_path / "a" / zt.PARTS).exists()
+    zt.train_zoom(det, tiny_dataset, tmp_path / "b", **kw)
+    with np.load(tmp_path / "a" / zt.EXAMPLES) as a, np.load(tmp_path / "b" / zt.EXAMPLES) as b:
+        assert len(a["targets"]) > 0
+        assert np.array_equal(a["patches"], b["patches"])
+        assert np.array_equal(a["targets"], b["targets"])
 
 
 def test_a_finished_run_resumed_is_only_tuned_again(tiny_dataset, tmp_path, monkeypatch):

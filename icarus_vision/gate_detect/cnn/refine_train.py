@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import copy
 import ctypes
-import hashlib
 import itertools
 import json
 from collections.abc import Callable
@@ -44,7 +43,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     stage_scores,
     verdicts,
 )
-from icarus_vision.gate_detect.cnn.stage_train import run_epochs
+from icarus_vision.gate_detect.cnn.stage_train import run_epochs, weights_digest
 from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
 
 CANDIDATES = DecodeConfig(
@@ -164,16 +163,6 @@ def collect(
         scores.append(stage_scores(gates)[ok])
     return Candidates(np.concatenate(idx), np.concatenate(quads), np.concatenate(targets),
                       np.concatenate(scores), per_image)  # fmt: skip
-
-
-def _weights_digest(net: torch.nn.Module) -> str:
-    """SHA-256 of a network's weights (names, shapes and values)."""
-    h = hashlib.sha256()
-    for name, t in sorted(net.state_dict().items()):
-        h.update(name.encode())
-        h.update(str(tuple(t.shape)).encode())
-        h.update(t.detach().contiguous().cpu().numpy().tobytes())
-    return h.hexdigest()
 
 
 def save_candidates(path: Path, cands: Candidates, key: dict) -> None:
@@ -564,7 +553,7 @@ def train_refiner(
         cand_cfg = replace(CANDIDATES, nms_iou=cfg.candidate_iou)
         key = {"data": [str(d) for d in dirs], "images": len(train.files), "limit": cfg.limit,
                "read_at": read_at, "decode": asdict(cand_cfg),
-               "corner_network": _weights_digest(corner_net)}  # fmt: skip
+               "corner_network": weights_digest(corner_net)}  # fmt: skip
         cands = load_candidates(out / CANDIDATE_CACHE, key) if resume else None
         if cands is None:
             cands = collect(first, train, cand_cfg, read_at)

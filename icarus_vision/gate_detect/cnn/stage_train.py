@@ -1,16 +1,32 @@
 """What the trainers of the detector's later stages (the refiner and the zoom stage) share: the
 epoch loop with its progress bar, TensorBoard logs, best and last checkpoints, history and Ctrl-C
-saving (their schedule is ``train.warmup_cosine``)."""
+saving (their schedule is ``train.warmup_cosine``), and the digest of networks' weights that keys
+their caches of the earlier stages' output."""
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from icarus_vision.fileio import atomic_write_json
+
+
+def weights_digest(*nets: torch.nn.Module) -> str:
+    """SHA-256 of networks' weights (names, shapes and values): what a cache of their outputs
+    is keyed by."""
+    h = hashlib.sha256()
+    for net in nets:
+        for name, t in sorted(net.state_dict().items()):
+            h.update(name.encode())
+            h.update(str(tuple(t.shape)).encode())
+            h.update(t.detach().contiguous().cpu().numpy().tobytes())
+    return h.hexdigest()
+
 
 EpochFn = Callable[[int, np.random.Generator, Callable[[float], None]], tuple[dict, dict, float]]
 """``one_epoch(epoch, rng, step) -> (mean loss terms with a "loss" key, val metrics, score)``;

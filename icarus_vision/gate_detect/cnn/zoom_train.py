@@ -5,7 +5,9 @@ matched to a counted labelled gate (eval-detector's rule) gives its four corner 
 the detector put the gate, and ``copies`` more cut where its corners were moved further at random
 (``jitter`` of the side), so that the corrections are learnt over a wider spread of errors than
 the detector happens to make. The patches are cut once and kept in ``OUT/examples.npz`` (arrays
-only, read without unpickling), so a resumed run does not run the detector again. Training
+only, read without unpickling), so a resumed run does not run the detector again; while they are
+being cut, every ``CHUNK`` images are kept in ``OUT/examples.parts/``, so a run interrupted then
+and started again with the same command continues from them. Training
 flips half of them about their diagonal (a mirrored corner: the target's two coordinates swap)
 and jitters brightness, contrast and noise. Every epoch is validated as eval-detector would
 score the detector with the stage on the val split; at the end the smallest gate it reads
@@ -15,6 +17,8 @@ score the detector with the stage on the val split; at the end the smallest gate
 from __future__ import annotations
 
 import copy
+import json
+import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -26,7 +30,7 @@ from icarus_vision.fileio import atomic_write_npz
 from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
 from icarus_vision.gate_detect.cnn.model import to_float
 from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
-from icarus_vision.gate_detect.cnn.stage_train import run_epochs
+from icarus_vision.gate_detect.cnn.stage_train import run_epochs, weights_digest
 from icarus_vision.gate_detect.cnn.tune import SCORE_TIE
 from icarus_vision.gate_detect.cnn.zoom import (
     ZoomConfig,
@@ -41,6 +45,10 @@ from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summar
 
 STATE = "zoom_state.pt"
 EXAMPLES = "examples.npz"
+PARTS = "examples.parts"
+CHUNK = 1000
+"""Training images whose patches are saved together in ``OUT/examples.parts/`` while they are
+cut (what an interrupted run keeps)."""
 ZOOM_ONNX = "zoom.onnx"
 MIN_SIDES = (20.0, 25.0, 30.0, 40.0, 60.0)
 """``ZoomConfig.min_side_px`` values tried on val, each with and without ``mirror`` (ties within
@@ -104,14 +112,17 @@ class ValFrames:
     owner: np.ndarray
 
 
-def detections(detector, split: Split, progress: bool = False, what: str = "") -> Iterator:
-    """Per image of ``split`` (loaded without pixels), the images and the detector's
-    (corners, score) list; an iterator, so that the images are not all kept."""
+def detections(
+    detector, split: Split, progress: bool = False, what: str = "", start: int = 0
+) -> Iterator:
+    """Per image of ``split`` (loaded without pixels) from index ``start`` on, the index, the
+    image and the detector's (corners, score) list; an iterator, so that the images are not all
+    kept."""
     from rich.progress import track
 
-    items = enumerate(split.files)
+    items = enumerate(split.files[start:], start)
     if progress:
-        items = track(items, total=len(split.files), description=f"detecting {what}")
+        items = track(items, total=len(split.files) - start, description=f"detecting {what}")
     for i, path in items:
         image = read_rgb(path)
         found = [(d.corners.astype(float), float(d.score)) for d in detector.detect(image)]
@@ -129,10 +140,31 @@ def training_examples(
     tcfg: ZoomTrainConfig,
     rng: np.random.Generator,
     progress: bool = False,
+    parts: Path | None = None,
+    key: str = "",
 ) -> Examples:
-    """Corner patches of the detector's matched detections on ``split`` (module docstring)."""
+    """Corner patches of the detector's matched detections on ``split`` (module docstring).
+
+    With ``parts``, the patches of every :data:`CHUNK` images are written there with ``key``
+    (what they were cut from) and ``rng``'s state; parts already there with the same ``key``
+    are read instead of running the detector again, and ``rng`` continues from where they left
+    it: the same examples as one uninterrupted pass.
+    """
     patches, targets = [], []
-    for i, image, found in detections(detector, split, progress, "train images"):
+    start = 0
+    while parts is not None and (parts / f"{start // CHUNK:05d}.npz").is_file():
+        try:
+            with np.load(parts / f"{start // CHUNK:05d}.npz", allow_pickle=False) as z:
+                if str(z["key"]) != key:
+                    break
+                patches.append(z["patches"])
+                targets.append(z["targets"])
+                rng.bit_generator.state = json.loads(str(z["rng"]))
+        except (OSError, ValueError, KeyError):  # an unreadable part: cut again from here
+            break
+        start += CHUNK
+    chunk_p, chunk_t = [], []
+    for i, image, found in detections(detector, split, progress, "train images", start):
         g_rec, _ = evaluate_image(found, _truth(split, i), tcfg.min_gate_px)
         for g in g_rec:
             if not (g["matched"] and g["evaluable"] and g["side"] >= tcfg.min_gate_px):
@@ -143,13 +175,26 @@ def training_examples(
             h, _ = homographies(quads, cfg)
             t = to_targets(h, np.tile(g["corners"], (len(quads), 1)), cfg)
             ok = np.isfinite(t).all(axis=1) & (np.abs(t) < 1.5).all(axis=1)
-            patches.append(extract(image, h[ok], cfg))
-            targets.append(t[ok].astype(np.float32))
-    p = cfg.patch
-    return Examples(
-        np.concatenate(patches) if patches else np.zeros((0, p, p, 3), np.uint8),
-        np.concatenate(targets) if targets else np.zeros((0, 2), np.float32),
-    )
+            chunk_p.append(extract(image, h[ok], cfg))
+            chunk_t.append(t[ok].astype(np.float32))
+        if (i + 1) % CHUNK == 0 or i + 1 == len(split.files):
+            p = _stack(chunk_p, (0, cfg.patch, cfg.patch, 3), np.uint8)
+            t = _stack(chunk_t, (0, 2), np.float32)
+            if parts is not None:
+                parts.mkdir(parents=True, exist_ok=True)
+                atomic_write_npz(parts / f"{i // CHUNK:05d}.npz", patches=p, targets=t,
+                                 key=np.array(key),
+                                 rng=np.array(json.dumps(rng.bit_generator.state)))  # fmt: skip
+            patches.append(p)
+            targets.append(t)
+            chunk_p, chunk_t = [], []
+    return Examples(_stack(patches, (0, cfg.patch, cfg.patch, 3), np.uint8),
+                    _stack(targets, (0, 2), np.float32))  # fmt: skip
+
+
+def _stack(arrays: list[np.ndarray], empty: tuple[int, ...], dtype) -> np.ndarray:
+    """``arrays`` concatenated, or an empty array of shape ``empty``."""
+    return np.concatenate(arrays) if arrays else np.zeros(empty, dtype)
 
 
 def val_frames(
@@ -294,7 +339,9 @@ def train_zoom(
     Output folder: ``best/`` and ``last/`` are complete detector checkpoints (the detector's
     networks copied, plus ``zoom.safetensors``); ``last/`` also holds ``zoom_state.pt`` (what
     ``resume`` reads); ``examples.npz`` (the training patches), ``zoom.onnx`` (best),
-    ``history.json`` and TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's
+    ``history.json`` and TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; Ctrl-C while the
+    patches are being cut keeps those of every :data:`CHUNK` images in ``examples.parts/``, and
+    the same command started again continues from them; every epoch's
     shuffle and augmentation depend on (seed, epoch) alone, so a resumed run trains as one never
     interrupted.
 
@@ -370,11 +417,19 @@ def train_zoom(
         train = _load_examples(out / EXAMPLES)
     elif not finished:
         rng = np.random.default_rng(cfg.seed)
-        parts = [training_examples(det, load_split(d, "train", None, cfg.limit), net.cfg, cfg,
-                                   rng, progress) for d in dirs]  # fmt: skip
+        digest = weights_digest(corner_net, refiner)
+        parts = []
+        for k, d in enumerate(dirs):
+            split = load_split(d, "train", None, cfg.limit)
+            cuts = {f: getattr(cfg, f) for f in ("seed", "copies", "jitter", "min_gate_px")}
+            key = json.dumps({"data": str(d), "images": len(split.files), "detector": digest,
+                              "zoom": net.cfg.to_dict(), **cuts}, sort_keys=True)  # fmt: skip
+            parts.append(training_examples(det, split, net.cfg, cfg, rng, progress,
+                                           out / PARTS / str(k), key))  # fmt: skip
         train = Examples(np.concatenate([p.patches for p in parts]),
                          np.concatenate([p.targets for p in parts]))  # fmt: skip
         atomic_write_npz(out / EXAMPLES, patches=train.patches, targets=train.targets)
+        shutil.rmtree(out / PARTS, ignore_errors=True)
         if not len(train.targets):
             raise ValueError(f"{dirs}: the detector matched no gate to train the zoom stage on")
     if log is not None and finished:
