@@ -16,6 +16,7 @@ Detection.
 
 from __future__ import annotations
 
+import logging
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -137,17 +138,25 @@ def quantize_network(
             batch = next(self._batches, None)
             return None if batch is None else dict(zip(names, batch, strict=True))
 
-    with tempfile.TemporaryDirectory() as tmp:
-        src, dst = Path(tmp) / "float.onnx", Path(tmp) / "int8.onnx"
-        src.write_bytes(model)
-        quantize_static(
-            src, dst, Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
-            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-            calibrate_method=getattr(CalibrationMethod, METHOD),
-            nodes_to_exclude=layer_nodes(model, float_layers),
-            extra_options={"CalibMaxIntermediateOutputs": 64},  # bounds calibration's memory
-        )  # fmt: skip
-        return dst.read_bytes()
+    root = logging.getLogger()
+    level = root.level
+    # Its advice to pre-process the model first (shape inference, graph optimisation) is logged
+    # as a warning on every call; the exported networks quantize without it.
+    root.setLevel(logging.ERROR)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            src, dst = Path(tmp) / "float.onnx", Path(tmp) / "int8.onnx"
+            src.write_bytes(model)
+            quantize_static(
+                src, dst, Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
+                activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+                calibrate_method=getattr(CalibrationMethod, METHOD),
+                nodes_to_exclude=layer_nodes(model, float_layers),
+                extra_options={"CalibMaxIntermediateOutputs": 64},  # bounds calibration's memory
+            )  # fmt: skip
+            return dst.read_bytes()
+    finally:
+        root.setLevel(level)
 
 
 def calibration_files(data: Sequence[str | Path], split: str, images: int, seed: int) -> list[Path]:
