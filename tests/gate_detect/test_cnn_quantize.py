@@ -163,6 +163,9 @@ def test_bad_calibration_requests_give_one_line_errors(quantized, tiny_dataset, 
     assert res.exit_code == 1 and "cnn or cnn:PATH" in res.output
     res = _quantize(src, tmp_path / "nowhere", tmp_path / "x")
     assert res.exit_code == 1 and "nowhere" in res.output
+    (tmp_path / "file").write_text("")
+    res = _quantize(src, tiny_dataset, tmp_path / "file")
+    assert res.exit_code == 1 and "not a folder" in res.output
     # a corner network that finds nothing leaves the refiner nothing to read
     quiet = tmp_path / "quiet"
     model, _, meta = load_checkpoint(src)

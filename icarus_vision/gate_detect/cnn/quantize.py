@@ -188,6 +188,9 @@ def quantize_detector(
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
 
     source = resolve(SHIPPED if detector is None else detector)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: not a folder (--out is the checkpoint folder to write)")
     files = calibration_files(data, split, images, seed)
     model, _, meta = load_checkpoint(source)
     torch_nets = {
@@ -209,7 +212,6 @@ def quantize_detector(
         )
     int8 = {name: quantize_network(m, inputs[name], keep[name])
             for name, m in onnx_models.items()}  # fmt: skip
-    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if out.resolve() != source.resolve():
         for name in (CONFIG, *FLOAT_WEIGHTS.values(), *EXTRA_FILES):
