@@ -228,7 +228,7 @@ def quantize_detector(
             "split": split,
             "images": len(files),
             "seed": seed,
-        },  # fmt: skip
+        },
         "float_layers": keep,
     }
     save_int8(out, int8, record)
