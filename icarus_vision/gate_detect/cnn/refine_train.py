@@ -14,7 +14,6 @@ from __future__ import annotations
 import copy
 import ctypes
 import itertools
-import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -43,7 +42,12 @@ from icarus_vision.gate_detect.cnn.refine import (
     stage_scores,
     verdicts,
 )
-from icarus_vision.gate_detect.cnn.stage_train import run_epochs, weights_digest
+from icarus_vision.gate_detect.cnn.stage_train import (
+    load_keyed,
+    run_epochs,
+    save_keyed,
+    weights_digest,
+)
 from icarus_vision.gate_detect.metrics import evaluate_image, mean_sides, summarize
 
 CANDIDATES = DecodeConfig(
@@ -167,23 +171,16 @@ def collect(
 
 def save_candidates(path: Path, cands: Candidates, key: dict) -> None:
     """Write the arrays of ``cands`` (not ``per_image``) and what they were collected from
-    (``key``, JSON) to ``path`` atomically."""
-    from icarus_vision.fileio import atomic_write_npz
-
-    atomic_write_npz(path, image=cands.image, quads=cands.quads, targets=cands.targets,
-                     scores=cands.scores, key=np.array(json.dumps(key, sort_keys=True)))  # fmt: skip
+    (``key``) to ``path`` atomically."""
+    save_keyed(path, key, image=cands.image, quads=cands.quads, targets=cands.targets,
+               scores=cands.scores)  # fmt: skip
 
 
 def load_candidates(path: Path, key: dict) -> Candidates | None:
     """The candidates saved at ``path`` if they were collected from ``key`` (else, or if the
     file is missing or unreadable, None: collect them again)."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if str(z["key"]) != json.dumps(key, sort_keys=True):
-                return None
-            return Candidates(z["image"], z["quads"], z["targets"], z["scores"], [])
-    except (OSError, ValueError, KeyError):
-        return None
+    z = load_keyed(path, key)
+    return None if z is None else Candidates(z["image"], z["quads"], z["targets"], z["scores"], [])
 
 
 def jittered_truth(split: Split, rng: np.random.Generator, min_side_px: float = 8.0):

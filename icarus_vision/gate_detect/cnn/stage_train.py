@@ -1,11 +1,13 @@
 """What the trainers of the detector's later stages (the refiner and the zoom stage) share: the
 epoch loop with its progress bar, TensorBoard logs, best and last checkpoints, history and Ctrl-C
-saving (their schedule is ``train.warmup_cosine``), and the digest of networks' weights that keys
-their caches of the earlier stages' output."""
+saving (their schedule is ``train.warmup_cosine``), and their caches of the earlier stages'
+output: arrays saved with the key they were computed from (:func:`save_keyed`), keyed by the
+networks' weights among others (:func:`weights_digest`)."""
 
 from __future__ import annotations
 
 import hashlib
+import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -13,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from icarus_vision.fileio import atomic_write_json
+from icarus_vision.fileio import atomic_write_json, atomic_write_npz
 
 
 def weights_digest(*nets: torch.nn.Module) -> str:
@@ -26,6 +28,23 @@ def weights_digest(*nets: torch.nn.Module) -> str:
             h.update(str(tuple(t.shape)).encode())
             h.update(t.detach().contiguous().cpu().numpy().tobytes())
     return h.hexdigest()
+
+
+def save_keyed(path: Path, key: dict, **arrays: np.ndarray) -> None:
+    """Write ``arrays`` and what they were computed from (``key``, JSON) to ``path`` atomically."""
+    atomic_write_npz(path, key=np.array(json.dumps(key, sort_keys=True)), **arrays)
+
+
+def load_keyed(path: Path, key: dict) -> dict[str, np.ndarray] | None:
+    """The arrays :func:`save_keyed` wrote at ``path`` if they were computed from ``key``; None
+    if they were not, or the file is missing or unreadable (compute them again)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["key"]) != json.dumps(key, sort_keys=True):
+                return None
+            return {k: z[k] for k in z.files if k != "key"}
+    except (OSError, ValueError, KeyError):
+        return None
 
 
 EpochFn = Callable[[int, np.random.Generator, Callable[[float], None]], tuple[dict, dict, float]]

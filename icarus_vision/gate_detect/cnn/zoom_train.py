@@ -30,7 +30,12 @@ from icarus_vision.fileio import atomic_write_npz
 from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
 from icarus_vision.gate_detect.cnn.model import to_float
 from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
-from icarus_vision.gate_detect.cnn.stage_train import run_epochs, weights_digest
+from icarus_vision.gate_detect.cnn.stage_train import (
+    load_keyed,
+    run_epochs,
+    save_keyed,
+    weights_digest,
+)
 from icarus_vision.gate_detect.cnn.tune import SCORE_TIE
 from icarus_vision.gate_detect.cnn.zoom import (
     ZoomConfig,
@@ -141,7 +146,7 @@ def training_examples(
     rng: np.random.Generator,
     progress: bool = False,
     parts: Path | None = None,
-    key: str = "",
+    key: dict | None = None,
 ) -> Examples:
     """Corner patches of the detector's matched detections on ``split`` (module docstring).
 
@@ -152,16 +157,13 @@ def training_examples(
     """
     patches, targets = [], []
     start = 0
-    while parts is not None and (parts / f"{start // CHUNK:05d}.npz").is_file():
-        try:
-            with np.load(parts / f"{start // CHUNK:05d}.npz", allow_pickle=False) as z:
-                if str(z["key"]) != key:
-                    break
-                patches.append(z["patches"])
-                targets.append(z["targets"])
-                rng.bit_generator.state = json.loads(str(z["rng"]))
-        except (OSError, ValueError, KeyError):  # an unreadable part: cut again from here
+    while parts is not None:
+        part = load_keyed(parts / f"{start // CHUNK:05d}.npz", key)
+        if part is None:  # missing, unreadable or cut from something else: cut from here
             break
+        patches.append(part["patches"])
+        targets.append(part["targets"])
+        rng.bit_generator.state = json.loads(str(part["rng"]))
         start += CHUNK
     chunk_p, chunk_t = [], []
     for i, image, found in detections(detector, split, progress, "train images", start):
@@ -182,9 +184,8 @@ def training_examples(
             t = _stack(chunk_t, (0, 2), np.float32)
             if parts is not None:
                 parts.mkdir(parents=True, exist_ok=True)
-                atomic_write_npz(parts / f"{i // CHUNK:05d}.npz", patches=p, targets=t,
-                                 key=np.array(key),
-                                 rng=np.array(json.dumps(rng.bit_generator.state)))  # fmt: skip
+                save_keyed(parts / f"{i // CHUNK:05d}.npz", key, patches=p, targets=t,
+                           rng=np.array(json.dumps(rng.bit_generator.state)))  # fmt: skip
             patches.append(p)
             targets.append(t)
             chunk_p, chunk_t = [], []
@@ -422,8 +423,8 @@ def train_zoom(
         for k, d in enumerate(dirs):
             split = load_split(d, "train", None, cfg.limit)
             cuts = {f: getattr(cfg, f) for f in ("seed", "copies", "jitter", "min_gate_px")}
-            key = json.dumps({"data": str(d), "images": len(split.files), "detector": digest,
-                              "zoom": net.cfg.to_dict(), **cuts}, sort_keys=True)  # fmt: skip
+            key = {"data": str(d), "images": len(split.files), "detector": digest,
+                   "zoom": net.cfg.to_dict(), **cuts}  # fmt: skip
             parts.append(training_examples(det, split, net.cfg, cfg, rng, progress,
                                            out / PARTS / str(k), key))  # fmt: skip
         train = Examples(np.concatenate([p.patches for p in parts]),
