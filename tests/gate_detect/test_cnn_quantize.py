@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
-from safetensors.torch import save_file
+from safetensors.torch import load_file, save_file
 from typer.testing import CliRunner
 
 import icarus_vision.gate_detect.cnn as cnn
@@ -132,7 +132,7 @@ def test_eval_detector_reports_the_backend_it_ran(quantized, tiny_dataset, tmp_p
     assert "(one core, int8)" in res.output
 
 
-def test_stale_or_corrupt_int8_networks_name_the_file(quantized, tmp_path):
+def test_stale_or_corrupt_int8_networks_name_the_file(quantized, tiny_dataset, tmp_path):
     _, out = quantized
     folder = tmp_path / "ck"
     folder.mkdir()
@@ -144,6 +144,19 @@ def test_stale_or_corrupt_int8_networks_name_the_file(quantized, tmp_path):
     save_file(state, str(folder / "model.safetensors"))  # new weights, the old int8 copies
     with pytest.raises(ValueError, match=r"model\.int8\.onnx.*other weights"):
         CnnDetector.load(folder)
+    # quantizing a checkpoint with stale copies again, in place, is what mends it
+    refreshed = tmp_path / "refreshed"
+    refreshed.mkdir()
+    for f in out.iterdir():
+        (refreshed / f.name).write_bytes(f.read_bytes())
+    zoom = load_file(refreshed / "zoom.safetensors")
+    save_file({k: v + 0.01 if v.is_floating_point() else v for k, v in zoom.items()},
+              str(refreshed / "zoom.safetensors"))  # fmt: skip
+    with pytest.raises(ValueError, match=r"zoom\.int8\.onnx.*other weights"):
+        CnnDetector.load(refreshed)
+    res = _quantize(refreshed, tiny_dataset, refreshed, "--images", "3", "--seed", "2")
+    assert res.exit_code == 0, res.output
+    assert CnnDetector.load(refreshed, backend="int8").backend == "int8"
     (folder / "model.safetensors").write_bytes((out / "model.safetensors").read_bytes())
     (folder / "zoom.int8.onnx").write_bytes(b"garbage")
     with pytest.raises(ValueError, match=r"zoom\.int8\.onnx.*not an ONNX model"):

@@ -192,14 +192,13 @@ def quantize_detector(
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: not a folder (--out is the checkpoint folder to write)")
     files = calibration_files(data, split, images, seed)
-    model, _, meta = load_checkpoint(source)
-    torch_nets = {
-        "model": model,
-        "refiner": load_refiner(source, meta),
-        "zoom": load_zoom(source, meta),
-    }
+    model, decode_cfg, meta = load_checkpoint(source)
+    refiner, zoom = load_refiner(source, meta), load_zoom(source, meta)
+    torch_nets = {"model": model, "refiner": refiner, "zoom": zoom}
     keep = {name: float_layers(net, name) for name, net in torch_nets.items() if net is not None}
-    float_det = CnnDetector.load(source, backend="onnxruntime")
+    # built from these networks, not CnnDetector.load: that refuses stale int8 copies, which
+    # are what this replaces
+    float_det = CnnDetector(model, decode_cfg, refiner=refiner, zoom=zoom, backend="onnxruntime")
     nets = {"model": float_det.model, "refiner": float_det.refiner, "zoom": float_det.zoom}
     onnx_models = {name: net.onnx for name, net in nets.items() if net is not None}
     step = None if progress is None else (lambda i: progress(i, len(files)))
