@@ -459,8 +459,9 @@ def train_refiner(
     ``refine_state.pt`` (what ``resume`` reads); ``candidates.npz`` (the training split's
     candidates: ``resume`` reads them instead of running the corner network over every
     training image again, unless the data or the network differ); ``refiner.onnx`` (best),
-    ``history.json`` and TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's shuffle and augmentation
-    depend on (seed, epoch) alone, so a resumed run trains as one never interrupted.
+    ``history.json`` and TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's
+    shuffle and augmentation depend on (seed, epoch) alone, so a resumed run trains as one never
+    interrupted.
 
     Args:
         detector: a trained first stage (checkpoint folder or file); its own refiner, if any,
