@@ -140,3 +140,10 @@ def test_race_refuses_a_policy_with_other_conventions(tmp_path):
     assert (
         res.exit_code == 1 and "action convention" in res.output and "Traceback" not in res.output
     )
+
+
+def test_train_refiner_margin_must_leave_an_opening(tmp_path):
+    res = runner.invoke(app, ["train-refiner", "--data", str(tmp_path), "--out",
+                              str(tmp_path / "o"), "--patch", "32", "--margin", "16"])  # fmt: skip
+    assert res.exit_code == 2 and "less than half the patch (32 px)" in res.output
+    assert not (tmp_path / "o").exists()

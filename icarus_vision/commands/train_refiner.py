@@ -36,6 +36,12 @@ def train_refiner_cmd(
     patch: int = typer.Option(
         48, min=16, help="Side of a new refiner's patch, px (a multiple of 8)."
     ),
+    margin: int = typer.Option(
+        8,
+        min=1,
+        help="Patch pixels between a new refiner's opening and the patch border on each side "
+        "(the context it sees around the opening; less than half the patch).",
+    ),
     widths: str = typer.Option(
         "16,32,64", help="Channels of a new refiner's three stages, comma-separated."
     ),
@@ -57,7 +63,7 @@ def train_refiner_cmd(
     init: Path = typer.Option(
         None,
         help="Start a new run from this checkpoint's refiner (its architecture: --patch, "
-        "--widths, --hidden and --square-hfov are then not used), e.g. to fine-tune it on new "
+        "--margin, --widths, --hidden and --square-hfov are then not used), e.g. to fine-tune it on new "
         "data with a lower --lr.",
     ),
     lr: float = typer.Option(2e-3, min=0.0, help="Peak learning rate of a new run (AdamW)."),
@@ -84,13 +90,18 @@ def train_refiner_cmd(
     from icarus_vision.gate_detect.cnn.refine import RefineConfig
     from icarus_vision.gate_detect.cnn.refine_train import RefineTrainConfig, train_refiner
 
+    if not margin < patch // 2:
+        raise typer.BadParameter(
+            f"must be less than half the patch ({patch} px)", param_hint="--margin"
+        )
     result = train_refiner(
         SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
         resume=resume,
         config=RefineTrainConfig(candidate_scale=candidate_scale, candidate_iou=candidate_iou,
                                  lr=lr),
         refine_config=RefineConfig(
-            patch=patch, widths=parse_widths(widths, 3), hidden=hidden, square_hfov_deg=square_hfov
+            patch=patch, margin=margin, widths=parse_widths(widths, 3), hidden=hidden,
+            square_hfov_deg=square_hfov,
         ),
         log=lambda s: console.print(s, highlight=False), val_data=val or None, init=init,
     )  # fmt: skip
