@@ -435,3 +435,44 @@ def test_training_candidates_read_at_the_detectors_input(tiny_dataset, tmp_path,
             config=replace(cfg, candidate_scale=0.0),
             **kw,
         )
+
+
+def test_a_new_run_reads_candidates_of_the_same_key_left_in_its_folder(
+    tiny_dataset, tmp_path, monkeypatch
+):
+    import shutil
+
+    first = _first_stage(tmp_path)
+    kw = {"epochs": 1, "config": rt.RefineTrainConfig(batch_size=16, tune=False),
+          "refine_config": RefineConfig(patch=16, margin=4), "progress": False}  # fmt: skip
+    rt.train_refiner(first, tiny_dataset, tmp_path / "a", **kw)
+    (tmp_path / "b").mkdir()
+    shutil.copy(tmp_path / "a" / rt.CANDIDATE_CACHE, tmp_path / "b" / rt.CANDIDATE_CACHE)
+    collected, collect = [], rt.collect
+    monkeypatch.setattr(rt, "collect", lambda *a, **k: collected.append(a[1]) or collect(*a, **k))
+    # another refiner (wider context) on the same data and corner network
+    rt.train_refiner(
+        first,
+        tiny_dataset,
+        tmp_path / "b",
+        **{**kw, "refine_config": RefineConfig(patch=16, margin=3)},
+    )
+    assert [len(split.files) for split in collected] == [4]  # the val split only
+    # another corner network: collected again
+    torch.manual_seed(1)
+    other = save_checkpoint(tmp_path / "other", CornerNet(TINY_MODEL).eval(), DecodeConfig())
+    (tmp_path / "d").mkdir()
+    shutil.copy(tmp_path / "a" / rt.CANDIDATE_CACHE, tmp_path / "d" / rt.CANDIDATE_CACHE)
+    collected.clear()
+    rt.train_refiner(other, tiny_dataset, tmp_path / "d", **kw)
+    assert [len(split.files) for split in collected] == [8, 4]  # train and val
+
+
+def test_a_dataset_generated_again_has_another_digest(tmp_path):
+    from icarus_vision.gate_detect.cnn.stage_train import dataset_digest
+
+    assert dataset_digest(tmp_path) == "none"
+    (tmp_path / "manifest.json").write_text('{"seed": 1}')
+    one = dataset_digest(tmp_path)
+    (tmp_path / "manifest.json").write_text('{"seed": 2}')
+    assert len(one) == 64 and dataset_digest(tmp_path) != one

@@ -43,6 +43,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     verdicts,
 )
 from icarus_vision.gate_detect.cnn.stage_train import (
+    dataset_digest,
     load_keyed,
     run_epochs,
     save_keyed,
@@ -550,9 +551,10 @@ def train_refiner(
         read_at = None if read_at == size else read_at
         cand_cfg = replace(CANDIDATES, nms_iou=cfg.candidate_iou)
         key = {"data": [str(d) for d in dirs], "images": len(train.files), "limit": cfg.limit,
-               "read_at": read_at, "decode": asdict(cand_cfg),
-               "corner_network": weights_digest(corner_net)}  # fmt: skip
-        cands = load_candidates(out / CANDIDATE_CACHE, key) if resume else None
+               "datasets": [dataset_digest(d) for d in dirs], "read_at": read_at,
+               "decode": asdict(cand_cfg), "corner_network": weights_digest(corner_net)}  # fmt: skip
+        # read by a resumed run, and by a new one in a folder holding those of the same key
+        cands = load_candidates(out / CANDIDATE_CACHE, key)
         if cands is None:
             cands = collect(first, train, cand_cfg, read_at)
             save_candidates(out / CANDIDATE_CACHE, cands, key)

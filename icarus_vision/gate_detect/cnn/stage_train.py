@@ -30,6 +30,16 @@ def weights_digest(*nets: torch.nn.Module) -> str:
     return h.hexdigest()
 
 
+def dataset_digest(data_dir: str | Path) -> str:
+    """SHA-256 of a gen-dataset folder's ``manifest.json`` (its seed, recipe, splits and shard
+    checksums; "none" without one): what a cache of outputs over its images is keyed by, so a
+    dataset generated again at the same path does not match."""
+    try:
+        return hashlib.sha256((Path(data_dir) / "manifest.json").read_bytes()).hexdigest()
+    except OSError:
+        return "none"
+
+
 def save_keyed(path: Path, key: dict, **arrays: np.ndarray) -> None:
     """Write ``arrays`` and what they were computed from (``key``, JSON) to ``path`` atomically."""
     atomic_write_npz(path, key=np.array(json.dumps(key, sort_keys=True)), **arrays)

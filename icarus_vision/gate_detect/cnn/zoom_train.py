@@ -31,6 +31,7 @@ from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
 from icarus_vision.gate_detect.cnn.model import to_float
 from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
 from icarus_vision.gate_detect.cnn.stage_train import (
+    dataset_digest,
     load_keyed,
     run_epochs,
     save_keyed,
@@ -423,7 +424,8 @@ def train_zoom(
         for k, d in enumerate(dirs):
             split = load_split(d, "train", None, cfg.limit)
             cuts = {f: getattr(cfg, f) for f in ("seed", "copies", "jitter", "min_gate_px")}
-            key = {"data": str(d), "images": len(split.files), "detector": digest,
+            key = {"data": str(d), "dataset": dataset_digest(d), "images": len(split.files),
+                   "detector": digest,
                    "zoom": net.cfg.to_dict(), **cuts}  # fmt: skip
             parts.append(training_examples(det, split, net.cfg, cfg, rng, progress,
                                            out / PARTS / str(k), key))  # fmt: skip
