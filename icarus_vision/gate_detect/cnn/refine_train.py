@@ -458,8 +458,9 @@ def train_refiner(
     Output folder: ``best/`` and ``last/`` are complete detector checkpoints (the corner network
     copied, its decoding set to :data:`CANDIDATES`, plus the refiner); ``last/`` also holds
     ``refine_state.pt`` (what ``resume`` reads); ``candidates.npz`` (the training split's
-    candidates: ``resume`` reads them instead of running the corner network over every
-    training image again, unless the data or the network differ); ``refiner.onnx`` (best),
+    candidates: a resumed run, or a new one whose folder holds them, reads them instead of
+    running the corner network over every training image again, unless the data or the network
+    differ); ``refiner.onnx`` (best),
     ``history.json`` and TensorBoard logs in ``tb/``. Ctrl-C saves ``last/``; every epoch's
     shuffle and augmentation depend on (seed, epoch) alone, so a resumed run trains as one never
     interrupted.
