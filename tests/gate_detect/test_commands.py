@@ -39,6 +39,18 @@ def test_eval_detector_writes_report_and_error_model(tiny_dataset, tmp_path):
     assert sheet is not None and sheet.shape == (240, 4 * 320, 3)
 
 
+def test_eval_detector_reads_the_split_asked_for(tiny_dataset, tmp_path):
+    out = tmp_path / "r.json"
+    r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--detector", "opencv",
+                            "--split", "val", "--json", str(out), "--resamples", "0"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    report = json.loads(out.read_text())
+    assert report["split"] == "val" and report["images"] == 4  # the tiny dataset's val split
+    assert "4 val images" in r.output and "by apparent size" in r.output
+    r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--split", "tset"])
+    assert r.exit_code == 2 and "expected one of test, val, train" in r.output
+
+
 @pytest.mark.parametrize(
     "args, needle",
     [
