@@ -47,13 +47,13 @@ def eval_detector_cmd(
         None, help="Write the error model here (default: beside --json, .error_model.json)."
     ),
     min_gate_px: float = typer.Option(20.0, help="Smallest counted gate (mean side), pixels."),
-    limit: int = typer.Option(None, min=1, help="Evaluate only the first N test images."),
+    limit: int = typer.Option(None, min=1, help="Evaluate only the first N images of the split."),
     examples: Path = typer.Option(
-        None, help="Also draw test images with true and found gates (.jpg/.png)."
+        None, help="Also draw images of the split with true and found gates (.jpg/.png)."
     ),
     num_examples: int = typer.Option(12, min=1, help="How many images --examples draws."),
     resamples: int = typer.Option(
-        1000, min=0, help="Bootstrap resamples of the test images for 95 % intervals (0: none)."
+        1000, min=0, help="Bootstrap resamples of the images for 95 % intervals (0: none)."
     ),
     seed: int = typer.Option(0, help="Seed of the bootstrap."),
     split: str = typer.Option(
@@ -61,7 +61,8 @@ def eval_detector_cmd(
     ),
 ) -> None:
     """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size,
-    with 95 % confidence intervals (bootstrap over the test images).
+    with 95 % confidence intervals (bootstrap over the images), on a dataset's test split (or
+    --split val).
 
     Also writes the detector's error model (gate-centre error and miss rate by distance) for
     `train-policy`'s perception noise.
