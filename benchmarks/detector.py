@@ -84,8 +84,7 @@ def main(argv: list[str] | None = None) -> dict:
     for spec in args.detectors:
         r = eval_detector(args.data, spec, limit=args.limit)
         keep = ("images", "gates", "min_gate_px", "precision", "recall", "corner_error_px", "pck",
-                "confidence", "ms_per_frame", "by_distance", "by_size")  # fmt: skip
-        keep += ("backend",)
+                "confidence", "ms_per_frame", "by_distance", "by_size", "backend")  # fmt: skip
         out["detectors"][spec] = {k: r[k] for k in keep} | {"latency": latency(spec, args.data)}
         if spec.split(":")[0] == "cnn":  # every backend, alternating (the machine's load drifts)
             backends = ["torch", "onnxruntime"]

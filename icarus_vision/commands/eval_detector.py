@@ -11,6 +11,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 from rich.table import Table
 
 from icarus_vision.cli import app, console, progress_reporter, user_errors
+from icarus_vision.dataset.layout import SPLITS
 
 
 def _fmt(x) -> str:
@@ -21,9 +22,6 @@ def _span(b: dict) -> str:
     if b["min"] == "all":
         return "all"
     return f"{b['min']:g}-" + ("" if b["max"] is None else f"{b['max']:g}")
-
-
-SPLITS = ("test", "val", "train")
 
 
 def _table(title: str, first: str, rows: list[dict]) -> Table:

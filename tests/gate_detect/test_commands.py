@@ -48,7 +48,7 @@ def test_eval_detector_reads_the_split_asked_for(tiny_dataset, tmp_path):
     assert report["split"] == "val" and report["images"] == 4  # the tiny dataset's val split
     assert "4 val images" in r.output and "by apparent size" in r.output
     r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--split", "tset"])
-    assert r.exit_code == 2 and "expected one of test, val, train" in r.output
+    assert r.exit_code == 2 and "expected one of train, val, test" in r.output
 
 
 @pytest.mark.parametrize(

@@ -70,7 +70,8 @@ range, as a fraction of the gate's side."""
 STATE = "refine_state.pt"
 REFINER_ONNX = "refiner.onnx"
 CANDIDATE_CACHE = "candidates.npz"
-"""The training split's labelled candidates, kept so that ``--resume`` need not find them again."""
+"""The training split's labelled candidates, kept so that a resumed run (or a new one in a folder
+holding them) need not find them again."""
 
 
 @dataclass

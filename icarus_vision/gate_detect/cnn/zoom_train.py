@@ -425,8 +425,7 @@ def train_zoom(
             split = load_split(d, "train", None, cfg.limit)
             cuts = {f: getattr(cfg, f) for f in ("seed", "copies", "jitter", "min_gate_px")}
             key = {"data": str(d), "dataset": dataset_digest(d), "images": len(split.files),
-                   "detector": digest,
-                   "zoom": net.cfg.to_dict(), **cuts}  # fmt: skip
+                   "detector": digest, "zoom": net.cfg.to_dict(), **cuts}  # fmt: skip
             parts.append(training_examples(det, split, net.cfg, cfg, rng, progress,
                                            out / PARTS / str(k), key))  # fmt: skip
         train = Examples(np.concatenate([p.patches for p in parts]),
