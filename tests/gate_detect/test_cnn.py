@@ -441,3 +441,8 @@ def test_boxes_apart_means_no_overlap():
     b = boxes(quads)
     assert apart(b[0], b[1]) and quad_iou(GATE_A, GATE_B) == 0.0
     assert not apart(b[0], b[2]) and quad_iou(GATE_A, GATE_A + 1.0) > 0.0
+
+
+def test_an_unknown_split_is_named_with_the_ones_there_are(tiny_dataset):
+    with pytest.raises(ValueError, match="split must be one of train, val, test, got 'tset'"):
+        load_split(tiny_dataset, "tset")

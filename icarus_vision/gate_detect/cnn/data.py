@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 from torch.utils.data import Dataset
 
+from icarus_vision.dataset.layout import SPLITS
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.augment import make_augment
 from icarus_vision.gate_detect.cnn.model import network_input
@@ -92,8 +93,10 @@ def load_split(
 
     Raises:
         FileNotFoundError: no such folder or annotation file, or a missing image (named).
-        ValueError: an unreadable annotation file or image (named).
+        ValueError: an unknown split, or an unreadable annotation file or image (named).
     """
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
     root = Path(data_dir)
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: dataset folder not found")
