@@ -17,7 +17,8 @@ per frame of each stage:
 - ``refiner_network``: the refiner's network calls, all readings of all candidates;
 - ``refiner_rest``: the rest of ``refine.verdicts`` (patch warping, geometry, corners back to
   the image, squareness);
-- ``select``: thresholds, squareness check and overlap test (``refine.select``);
+- ``select``: thresholds, squareness check and overlap test (``refine.select``; the check
+  after the zoom stage where there is one, ``refine.keep_square``);
 - ``zoom_network`` and ``zoom_rest``: the zoom stage's network call and the rest of
   ``zoom.sharpen`` (corner patches, corners back to the image), if the detector has one.
 
@@ -95,14 +96,18 @@ def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed, _Timed]:
         before = refiner.seconds
         v = refine.verdicts(refiner, im, gates, det.refine_cfg)
         t4 = time.perf_counter()
-        found = refine.select(v, peaks, det.refine_cfg, det.nms_iou)
+        found = refine.select(v, peaks, det.select_cfg, det.nms_iou)
         t5 = time.perf_counter()
         zoom_before = zoom.seconds
         if det.zoom is not None and found:
-            sharpen(zoom, im, np.stack([c for c, _, _ in found]), det.zoom_cfg)
+            moved = sharpen(zoom, im, np.stack([c for c, _, _ in found]), det.zoom_cfg)
+            found = [(q, s, score) for q, (_, s, score) in zip(moved, found, strict=True)]
         t6 = time.perf_counter()
+        if det.select_cfg is not det.refine_cfg:  # the squareness check on the zoomed corners
+            refine.keep_square(found, (w, h), det.refine_cfg)
+        t7 = time.perf_counter()
         net_s, zoom_s = refiner.seconds - before, zoom.seconds - zoom_before
-        times = (t1 - t0, t2 - t1, t3 - t2, net_s, t4 - t3 - net_s, t5 - t4, zoom_s,
+        times = (t1 - t0, t2 - t1, t3 - t2, net_s, t4 - t3 - net_s, t5 - t4 + t7 - t6, zoom_s,
                  t6 - t5 - zoom_s)  # fmt: skip
         for k, s in zip(STAGES, times, strict=True):
             sums[k] += s

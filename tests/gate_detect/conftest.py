@@ -62,3 +62,9 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(n)
+
+
+def facing_box(w: float, h: float, cx: float, cy: float = 120.0) -> np.ndarray:
+    """(4, 2) corners TL, TR, BR, BL of a w x h px opening centred at (cx, cy), facing the camera."""
+    return np.array([[cx - w / 2, cy - h / 2], [cx + w / 2, cy - h / 2],
+                     [cx + w / 2, cy + h / 2], [cx - w / 2, cy + h / 2]])  # fmt: skip

@@ -31,6 +31,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     RefineNet,
     Verdicts,
     geometry,
+    keep_square,
     refine,
     select,
     snap_to_peaks,
@@ -38,7 +39,7 @@ from icarus_vision.gate_detect.cnn.refine import (
 )
 from icarus_vision.gate_detect.metrics import mean_sides
 
-from .conftest import QUAD, TINY_MODEL, gate_image
+from .conftest import QUAD, TINY_MODEL, facing_box, gate_image
 
 CFG = RefineConfig(patch=40, margin=8)
 
@@ -219,11 +220,8 @@ def test_select_keeps_scores_over_the_threshold_best_first_without_overlaps():
 
 
 def test_select_drops_big_openings_that_are_not_square_when_asked():
-    def box(w: float, h: float, cx: float = 160.0) -> np.ndarray:  # facing the camera
-        return np.array([[cx - w / 2, 120 - h / 2], [cx + w / 2, 120 - h / 2],
-                         [cx + w / 2, 120 + h / 2], [cx - w / 2, 120 + h / 2]])  # fmt: skip
-
-    q = np.stack([box(48, 48, 60), box(64, 40, 250), box(24, 15, 160)])  # 1:1, 1.6:1, small 1.6:1
+    # 1:1, 1.6:1, small 1.6:1
+    q = np.stack([facing_box(48, 48, 60), facing_box(64, 40, 250), facing_box(24, 15, 160)])
     skew = np.abs(squareness(q, (320, 240), 95.0)[:, 0])
     assert skew[0] < 0.05 and skew[1] > 0.4
     v = Verdicts(np.full(3, 0.9), np.ones(3), q, skew)
@@ -476,3 +474,12 @@ def test_a_dataset_generated_again_has_another_digest(tmp_path):
     one = dataset_digest(tmp_path)
     (tmp_path / "manifest.json").write_text('{"seed": 2}')
     assert len(one) == 64 and dataset_digest(tmp_path) != one
+
+
+def test_keep_square_checks_the_corners_it_is_given():
+    found = [(facing_box(48, 48, 60), np.ones(4), 0.9), (facing_box(64, 40, 250), np.ones(4), 0.8),
+             (facing_box(24, 15, 160), np.ones(4), 0.7)]  # fmt: skip
+    kept = keep_square(found, (320, 240), RefineConfig(max_skew=0.4, skew_min_px=30.0))
+    assert [f[2] for f in kept] == [0.9, 0.7]  # the big 1.6:1 opening is dropped
+    assert keep_square(found, (320, 240), RefineConfig()) == found  # no check
+    assert keep_square([], (320, 240), RefineConfig(max_skew=0.4)) == []

@@ -35,7 +35,7 @@ from icarus_vision.gate_detect.cnn.zoom import (
     to_targets,
 )
 
-from .conftest import QUAD, TINY_MODEL, gate_image
+from .conftest import QUAD, TINY_MODEL, facing_box, gate_image
 
 CFG = ZoomConfig(patch=24, widths=(4, 8, 8, 8), hidden=16)
 
@@ -316,3 +316,30 @@ def test_train_zoom_needs_a_refiner(tiny_dataset, tmp_path):
     det = save_checkpoint(tmp_path / "det", CornerNet(TINY_MODEL), DecodeConfig())
     with pytest.raises(ValueError, match="refiner"):
         zt.train_zoom(det, tiny_dataset, tmp_path / "a", epochs=1, progress=False)
+
+
+def test_the_squareness_check_takes_the_zoomed_corners(monkeypatch):
+    """With a zoom stage, the refiner selects without the check and the detector checks the
+    corners the zoom stage moved: what it reports is square in 3-D, not what the refiner saw."""
+    import icarus_vision.gate_detect.cnn as cnn
+
+    square, wide = facing_box(48, 48, 60), facing_box(64, 40, 250)
+    small_wide = facing_box(24, 15, 160)
+    refined = [(wide, np.ones(4), 0.9), (facing_box(40, 40, 250), np.ones(4), 0.8),
+               (small_wide, np.ones(4), 0.7)]  # fmt: skip
+    zoomed = np.stack([square, wide, small_wide])  # the first becomes square, the second not
+    seen = {}
+
+    def fake_refine(net, image, cand, peaks, cfg, nms_iou):
+        seen["cfg"] = cfg
+        return refined
+
+    monkeypatch.setattr(cnn, "refine", fake_refine)
+    monkeypatch.setattr(cnn, "sharpen", lambda net, image, quads, cfg: zoomed)
+    refiner = RefineNet(RefineConfig(patch=16, margin=4, max_skew=0.4, skew_min_px=30.0))
+    det = CnnDetector(CornerNet(TINY_MODEL), refiner=refiner, zoom=_zoom(), backend="torch")
+    found = det.detect(gate_image())
+    assert seen["cfg"].max_skew == 0.0 and det.refine_cfg.max_skew == 0.4
+    # the square one and the small one (under skew_min_px) are kept, the one zoomed wide dropped
+    np.testing.assert_array_equal([d.corners for d in found], [square, small_wide])
+    assert [d.score for d in found] == [0.9, 0.7]

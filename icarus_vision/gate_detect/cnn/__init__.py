@@ -32,7 +32,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
 )
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
 from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
-from icarus_vision.gate_detect.cnn.refine import RefineNet, refine
+from icarus_vision.gate_detect.cnn.refine import RefineNet, keep_square, refine
 from icarus_vision.gate_detect.cnn.runtime import OnnxRuntimeNet, run_network
 from icarus_vision.gate_detect.cnn.zoom import ZoomNet, sharpen
 from icarus_vision.gate_detect.registry import register_detector
@@ -126,7 +126,8 @@ class CnnDetector(Detector):
             each for the network of the same weights passed here.
         zoom: a trained third stage (:class:`ZoomNet`): it reads each corner of every reported
             gate at least ``zoom.cfg.min_side_px`` across again, zoomed in, and moves it. It
-            runs as the refiner does.
+            runs as the refiner does. The refiner's squareness check (``max_skew``) then takes
+            the zoomed corners: on val, precision 0.941 instead of 0.937 (README).
     """
 
     name = "cnn"
@@ -191,6 +192,10 @@ class CnnDetector(Detector):
             self.refiner = self._runner(refiner, example, "refiner")
         self.zoom_cfg = None if zoom is None else zoom.cfg
         self.zoom = None
+        # With a zoom stage, the squareness check waits for its corners (:meth:`detect_batch`).
+        self.select_cfg = self.refine_cfg
+        if zoom is not None and refiner is not None:
+            self.select_cfg = replace(refiner.cfg, max_skew=0.0)
         if zoom is not None:
             p = zoom.cfg.patch
             self.zoom = self._runner(zoom, (torch.zeros(2, p, p, 3).permute(0, 3, 1, 2),), "zoom")
@@ -262,10 +267,12 @@ class CnnDetector(Detector):
                 found = decode(o, self.decode_cfg, scale)
             else:
                 cand, peaks = decode(o, self.decode_cfg, scale, with_peaks=True)
-                found = refine(self.refiner, im, cand, peaks, self.refine_cfg, self.nms_iou)
+                found = refine(self.refiner, im, cand, peaks, self.select_cfg, self.nms_iou)
             if self.zoom is not None and found:
                 moved = sharpen(self.zoom, im, np.stack([c for c, _, _ in found]), self.zoom_cfg)
                 found = [(q, s, score) for q, (_, s, score) in zip(moved, found, strict=True)]
+                if self.select_cfg is not self.refine_cfg:
+                    found = keep_square(found, (w, h), self.refine_cfg)
             results.append([GateDetection(c, s, score) for c, s, score in found])
         return results
 

@@ -265,8 +265,37 @@ def verdicts(
         again = usable(corners)  # a reading that folded a candidate: keep the last corners
         quads = np.where(again[:, None, None], corners, quads)
     stage = np.array([g[2] for g in gates])[ok]
-    skew = np.abs(squareness(quads, image.shape[1::-1], NOMINAL_HFOV_DEG)[:, 0])
-    return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, quads, skew)
+    return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, quads, skews(quads, image.shape[1::-1]))
+
+
+def skews(quads: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """(N,) |log of the ratio of the sides| in 3-D of (N, 4, 2) openings in a (W, H) frame,
+    under the nominal camera (:func:`squareness`, :data:`NOMINAL_HFOV_DEG`)."""
+    return np.abs(squareness(quads, image_size, NOMINAL_HFOV_DEG)[:, 0])
+
+
+def square_enough(skew: np.ndarray | None, corners: np.ndarray, cfg: RefineConfig) -> np.ndarray:
+    """(N,) whether each of (N, 4, 2) openings passes ``cfg.max_skew`` given its
+    :func:`skews` (None: not known, passes): square enough, smaller than ``cfg.skew_min_px``,
+    or no check."""
+    if cfg.max_skew <= 0 or skew is None:
+        return np.ones(len(corners), bool)
+    return (skew <= cfg.max_skew) | (mean_sides(corners) < cfg.skew_min_px)
+
+
+def keep_square(
+    found: list[tuple[np.ndarray, np.ndarray, float]],
+    image_size: tuple[int, int],
+    cfg: RefineConfig,
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The gates of ``found`` (``(corners (4, 2), corner_scores, score)`` in a (W, H) frame)
+    that pass ``cfg.max_skew`` (:func:`square_enough`) on their corners as they are: the
+    detector checks the zoom stage's corners so."""
+    if cfg.max_skew <= 0 or not found:
+        return found
+    q = np.stack([c for c, _, _ in found])
+    ok = square_enough(skews(q, image_size), q, cfg)
+    return [f for f, keep in zip(found, ok, strict=True) if keep]
 
 
 def read(
@@ -313,9 +342,7 @@ def select(
     from icarus_vision.gate_detect.cnn.decode import quad_iou
 
     score = v.prob * v.stage
-    ok = score >= cfg.threshold
-    if cfg.max_skew > 0 and v.skew is not None:
-        ok &= (v.skew <= cfg.max_skew) | (mean_sides(v.corners) < cfg.skew_min_px)
+    ok = (score >= cfg.threshold) & square_enough(v.skew, v.corners, cfg)
     keep = np.flatnonzero(ok)
     if not len(keep):
         return []
