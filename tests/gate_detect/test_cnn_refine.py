@@ -269,8 +269,8 @@ def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     with torch.no_grad():  # centre peaks regressing a square of 4 cells' half-side
         corner.out.bias[0] = 0.0
         corner.out.bias[7:15] = torch.tensor([-0.5, -0.5, 0.5, -0.5, 0.5, 0.5, -0.5, 0.5])
-    dets = [CnnDetector(corner, DecodeConfig(centre_threshold=0.0), refiner=every, **kw)
-            for kw in settings]  # fmt: skip
+    report = DecodeConfig(centre_threshold=0.0, max_outside_px=np.inf)  # wherever they are
+    dets = [CnnDetector(corner, report, refiner=every, **kw) for kw in settings]
     a, *others = (d.detect(img) for d in dets)
     assert isinstance(dets[2].refiner, OnnxRuntimeNet) and isinstance(dets[2].model, OnnxRuntimeNet)
     assert len(a) > 0
@@ -483,3 +483,17 @@ def test_keep_square_checks_the_corners_it_is_given():
     assert [f[2] for f in kept] == [0.9, 0.7]  # the big 1.6:1 opening is dropped
     assert keep_square(found, (320, 240), RefineConfig()) == found  # no check
     assert keep_square([], (320, 240), RefineConfig(max_skew=0.4)) == []
+
+
+def test_the_detector_reports_the_refiners_gates_in_the_frame_only(monkeypatch):
+    import icarus_vision.gate_detect.cnn as cnn
+
+    inside, cut = facing_box(40, 40, 100), facing_box(40, 40, 5)  # the second 15 px off the left
+    monkeypatch.setattr(
+        cnn, "refine", lambda *a: [(cut, np.ones(4), 0.9), (inside, np.ones(4), 0.8)]
+    )
+    det = CnnDetector(CornerNet(TINY_MODEL), refiner=_refiner(), backend="torch")
+    assert [d.score for d in det.detect(gate_image())] == [0.8]
+    det = CnnDetector(CornerNet(TINY_MODEL), DecodeConfig(max_outside_px=np.inf), refiner=_refiner(),
+                      backend="torch")  # fmt: skip
+    assert [d.score for d in det.detect(gate_image())] == [0.9, 0.8]

@@ -30,7 +30,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
     load_refiner,
     load_zoom,
 )
-from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, in_frame
 from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
 from icarus_vision.gate_detect.cnn.refine import RefineNet, keep_square, refine
 from icarus_vision.gate_detect.cnn.runtime import OnnxRuntimeNet, run_network
@@ -159,6 +159,7 @@ class CnnDetector(Detector):
             torch.set_num_threads(threads)
         self.decode_cfg = decode_cfg
         self.nms_iou = decode_cfg.nms_iou  # of the output (with a refiner, not its candidates')
+        self.max_outside_px = decode_cfg.max_outside_px  # likewise
         self.input_size = tuple(model.cfg.input_size)
         if backend in ("onnxruntime", "int8") and bf16:
             raise ValueError("bf16 runs on the torch backend only")
@@ -273,6 +274,8 @@ class CnnDetector(Detector):
                 found = [(q, s, score) for q, (_, s, score) in zip(moved, found, strict=True)]
                 if self.select_cfg is not self.refine_cfg:
                     found = keep_square(found, (w, h), self.refine_cfg)
+            if self.refiner is not None:  # decode checked the corner network's own gates
+                found = in_frame(found, (w, h), self.max_outside_px)
             results.append([GateDetection(c, s, score) for c, s, score in found])
         return results
 

@@ -49,6 +49,13 @@ class DecodeConfig:
     """Look for gates nested in (or around) each regressed one (module docstring)."""
     nested_residual: float = 0.05
     """Largest RMS misfit of a nested gate's corners to the regressed shape, relative to its size."""
+    max_outside_px: float = 1.5
+    """A gate is reported only if each of its corners lies in the image (which spans -0.5 to
+    W - 0.5 px) or at most this far outside it (:func:`in_frame`). A gate cut by the frame's
+    edge has corners no camera saw: the network extrapolates them, often wrongly, the estimator
+    cannot use them (``MeasurementConfig.image_margin_px``) and eval-detector counts no such
+    gate. inf: no check. Candidates for the refiner are not checked (it may move their corners
+    into the image); the detector checks its final corners."""
 
 
 NESTED_SCALE = (0.15, 6.0)
@@ -217,8 +224,9 @@ def decode(
     Returns:
         per gate ``(corners (4, 2) pixels TL, TR, BR, BL, corner_scores (4,), score)``, best first.
         A regressed gate's score is its centre peak's; a nested one's is that times the mean
-        score of its corners. With ``with_peaks``, a pair ``(gates, peaks)``, peaks being per
-        corner type ``(positions (M, 2) pixels, scores (M,))``.
+        score of its corners. Only gates :func:`in_frame`, unless ``with_peaks``: then the
+        candidates for the refiner, and a pair ``(gates, peaks)``, peaks being per corner type
+        ``(positions (M, 2) pixels, scores (M,))``.
     """
     if isinstance(out, torch.Tensor):
         out = out.detach().numpy()
@@ -239,7 +247,8 @@ def decode(
     found = _hypotheses(centres, vectors, heat[0, cys, cxs].tolist(), peaks, cfg)
     gates = _best(found, scale, cfg)
     if not with_peaks:
-        return gates
+        size = (scale[0] * out.shape[-1], scale[1] * out.shape[-2])
+        return in_frame(gates, size, cfg.max_outside_px)
     pos, _, val = peaks
     per_type = itertools.pairwise([e - ends[1] for e in ends[1:]])
     return gates, [(pos[a:b] * np.asarray(scale) - 0.5, val[a:b]) for a, b in per_type]
@@ -308,6 +317,22 @@ def _best(
         if len(gates) == cfg.max_gates:
             break
     return gates
+
+
+def in_frame(
+    found: list[tuple[np.ndarray, np.ndarray, float]],
+    image_size: tuple[int, int],
+    max_outside_px: float,
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The gates of ``found`` (``(corners (4, 2) px, corner_scores, score)``) whose corners all
+    lie within ``max_outside_px`` of a (W, H) image (``DecodeConfig.max_outside_px``)."""
+    if not found or not np.isfinite(max_outside_px):
+        return found
+    w, h = image_size
+    q = np.stack([c for c, _, _ in found])
+    lo, hi = -0.5 - max_outside_px, np.array([w, h]) - 0.5 + max_outside_px
+    ok = ((q >= lo) & (q <= hi)).all(axis=(1, 2))
+    return [f for f, keep in zip(found, ok, strict=True) if keep]
 
 
 def quad_iou(a: np.ndarray, b: np.ndarray) -> float:

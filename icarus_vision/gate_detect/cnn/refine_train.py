@@ -23,7 +23,7 @@ import torch
 
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.data import Split
-from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode
+from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, in_frame
 from icarus_vision.gate_detect.cnn.model import network_input
 from icarus_vision.gate_detect.cnn.rectify import (
     corners_to_offsets,
@@ -278,10 +278,12 @@ def evaluate(
     min_gate_px: float = 20.0,
     nms_iou: float = 0.5,
     read: list[Verdicts] | None = None,
+    max_outside_px: float = DecodeConfig.max_outside_px,
 ) -> dict:
     """eval-detector figures of first stage + refiner on ``split`` (first-stage output given;
     ``read``: the refiner's verdicts on it too, read at a floor no higher than
-    ``cfg.threshold``)."""
+    ``cfg.threshold``), reporting gates :func:`~icarus_vision.gate_detect.cnn.decode.in_frame`
+    as the detector does."""
     net.eval()
     if read is None:
         read = [
@@ -290,7 +292,7 @@ def evaluate(
         ]
     gts, preds = [], []
     for v, (_, peaks), truth in zip(read, per_image, split.gates, strict=True):
-        found = select(v, peaks, cfg, nms_iou)
+        found = in_frame(select(v, peaks, cfg, nms_iou), split.image_size, max_outside_px)
         t = [(g.corners, g.visibility, g.distance) for g in truth]
         g_rec, p_rec = evaluate_image([(c, s) for c, _, s in found], t, min_gate_px)
         gts += g_rec
