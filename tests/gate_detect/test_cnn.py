@@ -452,7 +452,7 @@ def test_an_unknown_split_is_named_with_the_ones_there_are(tiny_dataset):
 def test_gates_cut_by_the_frame_edge_are_candidates_but_not_reported():
     cut = GATE_A - (35.0, 0.0)  # its left corners 5 grid cells (20 px) left of the image
     logits = _as_logits(encode_targets([(cut, VIS), (GATE_B, VIS)], 80, 60)[0])
-    everywhere = decode(logits, DecodeConfig(max_outside_px=np.inf), (4.0, 4.0))
+    everywhere = decode(logits, DecodeConfig(max_outside_px=None), (4.0, 4.0))
     assert len(everywhere) == 2 and min(c[:, 0].min() for c, _, _ in everywhere) < -15.0
     found = decode(logits, DecodeConfig(), (4.0, 4.0))
     assert len(found) == 1 and np.abs(found[0][0] - (GATE_B * 4.0 - 0.5)).max() < 1e-3
@@ -467,7 +467,7 @@ def test_in_frame_allows_corners_up_to_the_margin_outside_the_image():
 
     found = [gate(0.0), gate(1.4), gate(1.6), gate(-3.0)]
     assert [f[0][0, 0] for f in in_frame(found, (320, 240), 1.5)] == [-0.5, -1.9, 2.5]
-    assert in_frame(found, (320, 240), np.inf) == found
+    assert in_frame(found, (320, 240), None) == found
     bottom = (np.array([[10.0, 200.0], [50.0, 200.0], [50.0, 241.0], [10.0, 241.0]]), None, 1.0)
     assert in_frame([bottom], (320, 240), 1.5) == [bottom] and not in_frame(
         [bottom], (320, 240), 1.0

@@ -269,7 +269,7 @@ def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     with torch.no_grad():  # centre peaks regressing a square of 4 cells' half-side
         corner.out.bias[0] = 0.0
         corner.out.bias[7:15] = torch.tensor([-0.5, -0.5, 0.5, -0.5, 0.5, 0.5, -0.5, 0.5])
-    report = DecodeConfig(centre_threshold=0.0, max_outside_px=np.inf)  # wherever they are
+    report = DecodeConfig(centre_threshold=0.0, max_outside_px=None)  # wherever they are
     dets = [CnnDetector(corner, report, refiner=every, **kw) for kw in settings]
     a, *others = (d.detect(img) for d in dets)
     assert isinstance(dets[2].refiner, OnnxRuntimeNet) and isinstance(dets[2].model, OnnxRuntimeNet)
@@ -494,6 +494,6 @@ def test_the_detector_reports_the_refiners_gates_in_the_frame_only(monkeypatch):
     )
     det = CnnDetector(CornerNet(TINY_MODEL), refiner=_refiner(), backend="torch")
     assert [d.score for d in det.detect(gate_image())] == [0.8]
-    det = CnnDetector(CornerNet(TINY_MODEL), DecodeConfig(max_outside_px=np.inf), refiner=_refiner(),
+    det = CnnDetector(CornerNet(TINY_MODEL), DecodeConfig(max_outside_px=None), refiner=_refiner(),
                       backend="torch")  # fmt: skip
     assert [d.score for d in det.detect(gate_image())] == [0.9, 0.8]

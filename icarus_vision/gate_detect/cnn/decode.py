@@ -49,12 +49,12 @@ class DecodeConfig:
     """Look for gates nested in (or around) each regressed one (module docstring)."""
     nested_residual: float = 0.05
     """Largest RMS misfit of a nested gate's corners to the regressed shape, relative to its size."""
-    max_outside_px: float = 1.5
+    max_outside_px: float | None = 1.5
     """A gate is reported only if each of its corners lies in the image (which spans -0.5 to
     W - 0.5 px) or at most this far outside it (:func:`in_frame`). A gate cut by the frame's
     edge has corners no camera saw: the network extrapolates them, often wrongly, the estimator
     cannot use them (``MeasurementConfig.image_margin_px``) and eval-detector counts no such
-    gate. inf: no check. Candidates for the refiner are not checked (it may move their corners
+    gate. None: no check. Candidates for the refiner are not checked (it may move their corners
     into the image); the detector checks its final corners."""
 
 
@@ -322,11 +322,12 @@ def _best(
 def in_frame(
     found: list[tuple[np.ndarray, np.ndarray, float]],
     image_size: tuple[int, int],
-    max_outside_px: float,
+    max_outside_px: float | None,
 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """The gates of ``found`` (``(corners (4, 2) px, corner_scores, score)``) whose corners all
-    lie within ``max_outside_px`` of a (W, H) image (``DecodeConfig.max_outside_px``)."""
-    if not found or not np.isfinite(max_outside_px):
+    lie within ``max_outside_px`` of a (W, H) image (``DecodeConfig.max_outside_px``; None: all
+    of them)."""
+    if not found or max_outside_px is None:
         return found
     w, h = image_size
     q = np.stack([c for c, _, _ in found])

@@ -278,7 +278,7 @@ def evaluate(
     min_gate_px: float = 20.0,
     nms_iou: float = 0.5,
     read: list[Verdicts] | None = None,
-    max_outside_px: float = DecodeConfig.max_outside_px,
+    max_outside_px: float | None = DecodeConfig.max_outside_px,
 ) -> dict:
     """eval-detector figures of first stage + refiner on ``split`` (first-stage output given;
     ``read``: the refiner's verdicts on it too, read at a floor no higher than

@@ -1,0 +1,140 @@
+"""The CNN detector's operating point: its figures on val splits at each refiner threshold and
+out-of-frame margin, from one run of the detector.
+
+Usage::
+
+    python benchmarks/detector_operating_point.py [--detector cnn[:PATH]] [--backend auto|int8|onnxruntime]
+        [--data datasets/gates-v2-ft12 --data datasets/gates-v2-test5] [--split val]
+        [--thresholds 0.15 0.2 0.25 0.3 0.35] [--outside none 0.5 1.5 3] [--limit N] [--json PATH]
+
+Runs the detector once per frame (one thread) with the refiner's threshold at the lowest of
+``--thresholds`` and no out-of-frame check (``DecodeConfig.max_outside_px`` None), then keeps,
+for each (threshold, margin), the gates scoring at least the threshold with their corners within
+the margin of the image (``decode.in_frame``). That equals running the detector at that
+setting: a gate's score, the overlap test (greedy by score) and the squareness check do not
+depend on gates scoring less, and the margin is checked last. Prints, per setting and dataset,
+precision, recall, PCK@2px and PCK@5px (the eval-detector rule, gates >= 20 px) and the
+smallest of precision, recall and PCK@5px over all datasets (the figures #4 sets targets for),
+best first; the checkpoint's own setting is marked. The split defaults to val, so that the
+choice leaves the test splits for the README's figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from icarus_vision.fileio import atomic_write_json
+from icarus_vision.gate_detect.cnn import CnnDetector
+from icarus_vision.gate_detect.cnn.checkpoint import (
+    SHIPPED,
+    load_checkpoint,
+    load_int8,
+    load_refiner,
+    load_zoom,
+)
+from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.cnn.decode import in_frame
+from icarus_vision.gate_detect.evaluate import one_thread
+from icarus_vision.gate_detect.metrics import evaluate_image, summarize
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = [ROOT / "datasets" / "gates-v2-ft12", ROOT / "datasets" / "gates-v2-test5"]
+MIN_GATE_PX = 20.0
+
+
+def loose_detector(path: Path, floor: float, backend: str) -> tuple[CnnDetector, dict]:
+    """The checkpoint's detector with its refiner's threshold at ``floor`` and no out-of-frame
+    check, and the checkpoint's own setting (``threshold``, ``max_outside_px``)."""
+    model, decode_cfg, meta = load_checkpoint(path)
+    refiner = load_refiner(path, meta)
+    if refiner is None:
+        sys.exit(f"{path}: not a detector with a refiner")
+    own = {"threshold": refiner.cfg.threshold, "max_outside_px": decode_cfg.max_outside_px}
+    refiner.cfg = replace(refiner.cfg, threshold=floor)
+    det = CnnDetector(
+        model, replace(decode_cfg, max_outside_px=None), refiner=refiner,
+        zoom=load_zoom(path, meta), int8=load_int8(path, meta), backend=backend,
+    )  # fmt: skip
+    return det, own
+
+
+def detections(det: CnnDetector, data: Path, split: str, limit: int | None) -> list[tuple]:
+    """Per image of the split: (found ``(corners, scores, score)`` list, truth, image size)."""
+    d = load_split(data, split, None, limit)
+    out = []
+    with one_thread():
+        for path, gates in zip(d.files, d.gates, strict=True):
+            found = [(g.corners, g.corner_scores, g.score) for g in det.detect(read_rgb(path))]
+            truth = [(g.corners, g.visibility, g.distance) for g in gates]
+            out.append((found, truth, d.image_size))
+    return out
+
+
+def figures(per_image: list[tuple], threshold: float, outside: float | None) -> dict:
+    """Precision, recall and PCKs of the gates kept at ``threshold`` and margin ``outside``."""
+    gts, preds = [], []
+    for found, truth, size in per_image:
+        kept = in_frame([f for f in found if f[2] >= threshold], size, outside)
+        g, p = evaluate_image([(c, s) for c, _, s in kept], truth, MIN_GATE_PX)
+        gts += g
+        preds += p
+    s = summarize(gts, preds, MIN_GATE_PX)
+    return {"precision": s["precision"], "recall": s["recall"], "pck_2px": s["pck"]["2px"],
+            "pck_5px": s["pck"]["5px"]}  # fmt: skip
+
+
+def margin(text: str) -> float | None:
+    """An ``--outside`` value: pixels, or ``none``."""
+    return None if text.lower() == "none" else float(text)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--detector", default="cnn", help="cnn (shipped) or cnn:PATH")
+    ap.add_argument("--backend", default="auto", help="auto, int8 or onnxruntime")
+    ap.add_argument("--data", type=Path, action="append", help="repeatable (default: two)")
+    ap.add_argument("--split", default="val")
+    ap.add_argument("--thresholds", type=float, nargs="+", default=[0.15, 0.2, 0.25, 0.3, 0.35])
+    ap.add_argument(
+        "--outside",
+        type=margin,
+        nargs="+",
+        default=[None, 0.5, 1.5, 3.0],
+        help="out-of-frame margins, px ('none': no check)",
+    )
+    ap.add_argument("--limit", type=int, default=None, help="Only the first N images of each.")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    path = Path(args.detector.partition(":")[2] or SHIPPED)
+    det, own = loose_detector(path, min(args.thresholds), args.backend)
+    data = args.data or DATA
+    runs = {str(d): detections(det, d, args.split, args.limit) for d in data}
+    rows = []
+    for t, o in itertools.product(args.thresholds, args.outside):
+        per = {name: figures(r, t, o) for name, r in runs.items()}
+        low = min(min(f["precision"] or 0, f["recall"] or 0, f["pck_5px"] or 0)
+                  for f in per.values())  # fmt: skip
+        rows.append({"threshold": t, "max_outside_px": o, "min": round(low, 4), "by_data": per})
+    rows.sort(key=lambda r: -r["min"])
+    for r in rows:
+        mark = " (the checkpoint's)" if (r["threshold"], r["max_outside_px"]) == tuple(
+            own.values()) else ""  # fmt: skip
+        cells = " | ".join(
+            "{precision:.4f} / {recall:.4f} / {pck_2px:.4f} / {pck_5px:.4f}".format(**f)
+            for f in r["by_data"].values()
+        )
+        print(f"threshold {r['threshold']:<5} outside {str(r['max_outside_px']):<4} "
+              f"min {r['min']:.4f} | {cells}{mark}")  # fmt: skip
+    out = {"detector": args.detector, "backend": det.backend, "split": args.split,
+           "data": [str(d) for d in data], "own": own, "rows": rows}  # fmt: skip
+    if args.json:
+        atomic_write_json(args.json, out)
+    return out
+
+
+if __name__ == "__main__":
+    main()
