@@ -94,7 +94,7 @@ def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed, _Timed]:
         )
         t3 = time.perf_counter()
         before = refiner.seconds
-        v = refine.verdicts(refiner, im, gates, det.refine_cfg)
+        v = refine.verdicts(refiner, im, gates, det.select_cfg, skew=det.select_cfg.max_skew > 0)
         t4 = time.perf_counter()
         found = refine.select(v, peaks, det.select_cfg, det.nms_iou)
         t5 = time.perf_counter()

@@ -237,6 +237,7 @@ def verdicts(
     cfg: RefineConfig,
     floor: float | None = None,
     dtype: torch.dtype = torch.float32,
+    skew: bool = True,
 ) -> Verdicts:
     """Run the refiner on one image's candidates.
 
@@ -250,6 +251,7 @@ def verdicts(
         floor: candidates the first stage scored under this are not looked at (default
             ``cfg.threshold``: the refiner's probability is at most 1, so they cannot pass).
         dtype: the network's input dtype.
+        skew: measure each candidate's :func:`skews` (else ``Verdicts.skew`` is None).
     """
     floor = cfg.threshold if floor is None else floor
     gates = [g for g in gates if g[2] >= floor]
@@ -265,7 +267,8 @@ def verdicts(
         again = usable(corners)  # a reading that folded a candidate: keep the last corners
         quads = np.where(again[:, None, None], corners, quads)
     stage = np.array([g[2] for g in gates])[ok]
-    return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, quads, skews(quads, image.shape[1::-1]))
+    measured = skews(quads, image.shape[1::-1]) if skew else None
+    return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, quads, measured)
 
 
 def skews(quads: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
@@ -381,4 +384,5 @@ def refine(
         refiner's gate probability times the first stage's score: on the val split this product
         separated gates from the rest better than either alone (README).
     """
-    return select(verdicts(net, image, gates, cfg, dtype=dtype), peaks, cfg, nms_iou)
+    v = verdicts(net, image, gates, cfg, dtype=dtype, skew=cfg.max_skew > 0)
+    return select(v, peaks, cfg, nms_iou)
