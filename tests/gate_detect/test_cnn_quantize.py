@@ -194,3 +194,15 @@ def test_float_layers_name_nodes_of_the_exported_networks(quantized):
     assert nodes == ["/enc1/enc1.0/enc1.0.0/Conv", "/enc1/enc1.0/enc1.0.2/Relu", "/out/Conv"]
     with pytest.raises(ValueError, match="no ONNX node belongs to module 'nothing'"):
         layer_nodes(det.model.onnx, ["nothing"])
+
+
+def test_another_checkpoint_in_out_is_refused_not_overwritten(quantized, tiny_dataset, tmp_path):
+    src, _ = quantized
+    other = _checkpoint(tmp_path / "other")
+    before = {f.name: f.read_bytes() for f in other.iterdir()}
+    res = _quantize(src, tiny_dataset, other, "--images", "2")
+    assert res.exit_code == 1 and "holds another checkpoint" in res.output
+    assert "--detector cnn:" in res.output
+    assert {f.name: f.read_bytes() for f in other.iterdir()} == before
+    res = _quantize(other, tiny_dataset, other, "--images", "2")  # in place: allowed
+    assert res.exit_code == 0, res.output

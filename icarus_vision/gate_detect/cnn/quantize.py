@@ -182,7 +182,8 @@ def quantize_detector(
     progress: Callable[[int, int], None] | None = None,
 ) -> dict:
     """Write a copy of the checkpoint ``detector`` (None: the shipped one) to ``out`` (or add to
-    it in place, if ``out`` is that folder) with int8 copies of its networks, calibrated on
+    it in place, if ``out`` is that folder; a folder holding another checkpoint is refused, not
+    overwritten) with int8 copies of its networks, calibrated on
     ``images`` frames of ``data``'s ``split`` (drawn with ``seed``); returns the JSON's new
     ``int8`` section (``networks``: their names). ``progress`` is called with (frames done, frames)."""
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
@@ -191,6 +192,11 @@ def quantize_detector(
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: not a folder (--out is the checkpoint folder to write)")
+    if (out / CONFIG).is_file() and out.resolve() != source.resolve():
+        raise ValueError(
+            f"{out} holds another checkpoint, which a copy of {source} would replace: to add "
+            f"int8 copies to it, pass --detector cnn:{out}; else choose an empty --out"
+        )
     files = calibration_files(data, split, images, seed)
     model, decode_cfg, meta = load_checkpoint(source)
     refiner, zoom = load_refiner(source, meta), load_zoom(source, meta)
