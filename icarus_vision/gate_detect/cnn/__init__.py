@@ -127,7 +127,8 @@ class CnnDetector(Detector):
         zoom: a trained third stage (:class:`ZoomNet`): it reads each corner of every reported
             gate at least ``zoom.cfg.min_side_px`` across again, zoomed in, and moves it. It
             runs as the refiner does. The refiner's squareness check (``max_skew``) then takes
-            the zoomed corners: on val, precision 0.941 instead of 0.937 (README).
+            the zoomed corners, the more precise ones (on val, a little more precision:
+            docs/detector-history.md).
     """
 
     name = "cnn"
