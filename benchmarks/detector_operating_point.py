@@ -5,14 +5,17 @@ Usage::
 
     python benchmarks/detector_operating_point.py [--detector cnn[:PATH]] [--backend auto|int8|onnxruntime]
         [--data datasets/gates-v2-ft12 --data datasets/gates-v2-test5] [--split val]
-        [--thresholds 0.15 0.2 0.25 0.3 0.35] [--outside none 0.5 1.5 3] [--limit N] [--json PATH]
+        [--thresholds 0.15 0.2 0.25 0.3 0.35] [--outside none 0.5 1.5 3]
+        [--max-skew 0.3 0.4] [--skew-min-px 20 30] [--limit N] [--json PATH]
 
 Runs the detector once per frame (one thread) with the refiner's threshold at the lowest of
-``--thresholds`` and no out-of-frame check (``DecodeConfig.max_outside_px`` None), then keeps,
-for each (threshold, margin), the gates scoring at least the threshold with their corners within
-the margin of the image (``decode.in_frame``). That equals running the detector at that
-setting: a gate's score, the overlap test (greedy by score) and the squareness check do not
-depend on gates scoring less, and the margin is checked last. Prints, per setting and dataset,
+``--thresholds``, no out-of-frame check (``DecodeConfig.max_outside_px`` None) and, where the
+zoom stage's corners are checked for squareness, no squareness check; then keeps, for each
+(threshold, margin, squareness setting), the gates scoring at least the threshold, square
+enough (``refine.keep_square``) and with their corners within the margin of the image
+(``decode.in_frame``). That equals running the detector at that setting: a gate's score and the
+overlap test (greedy by score) do not depend on gates scoring less, and the squareness and the
+margin are checked last, in that order. The squareness settings default to the checkpoint's. Prints, per setting and dataset,
 precision, recall, PCK@2px and PCK@5px (the eval-detector rule, gates >= 20 px) and the
 smallest of precision, recall and PCK@5px over all datasets (the figures #4 sets targets for),
 best first; the checkpoint's own setting is marked. The split defaults to val, so that the
@@ -38,6 +41,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
 )
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.decode import in_frame
+from icarus_vision.gate_detect.cnn.refine import RefineConfig, keep_square
 from icarus_vision.gate_detect.evaluate import one_thread
 from icarus_vision.gate_detect.metrics import evaluate_image, summarize
 
@@ -46,20 +50,29 @@ DATA = [ROOT / "datasets" / "gates-v2-ft12", ROOT / "datasets" / "gates-v2-test5
 MIN_GATE_PX = 20.0
 
 
-def loose_detector(path: Path, floor: float, backend: str) -> tuple[CnnDetector, dict]:
-    """The checkpoint's detector with its refiner's threshold at ``floor`` and no out-of-frame
-    check, and the checkpoint's own setting (``threshold``, ``max_outside_px``)."""
+def loose_detector(
+    path: Path, floor: float, backend: str
+) -> tuple[CnnDetector, dict, RefineConfig | None]:
+    """The checkpoint's detector with its refiner's threshold at ``floor``, no out-of-frame
+    check and, where it checks the zoom stage's corners for squareness, no such check; the
+    checkpoint's own setting (``threshold``, ``max_outside_px``, ``max_skew``, ``skew_min_px``);
+    and the refiner configuration to check squareness with afterwards (None: the detector
+    checks it itself, on the refiner's corners, so it cannot be varied)."""
     model, decode_cfg, meta = load_checkpoint(path)
     refiner = load_refiner(path, meta)
     if refiner is None:
         sys.exit(f"{path}: not a detector with a refiner")
-    own = {"threshold": refiner.cfg.threshold, "max_outside_px": decode_cfg.max_outside_px}
-    refiner.cfg = replace(refiner.cfg, threshold=floor)
+    own_cfg = refiner.cfg
+    own = {"threshold": own_cfg.threshold, "max_outside_px": decode_cfg.max_outside_px,
+           "max_skew": own_cfg.max_skew, "skew_min_px": own_cfg.skew_min_px}  # fmt: skip
+    zoom = load_zoom(path, meta)
+    late = zoom is not None and own_cfg.max_skew > 0
+    refiner.cfg = replace(own_cfg, threshold=floor, max_skew=0.0 if late else own_cfg.max_skew)
     det = CnnDetector(
         model, replace(decode_cfg, max_outside_px=None), refiner=refiner,
-        zoom=load_zoom(path, meta), int8=load_int8(path, meta), backend=backend,
+        zoom=zoom, int8=load_int8(path, meta), backend=backend,
     )  # fmt: skip
-    return det, own
+    return det, own, own_cfg if late else None
 
 
 def detections(det: CnnDetector, data: Path, split: str, limit: int | None) -> list[tuple]:
@@ -74,11 +87,20 @@ def detections(det: CnnDetector, data: Path, split: str, limit: int | None) -> l
     return out
 
 
-def figures(per_image: list[tuple], threshold: float, outside: float | None) -> dict:
-    """Precision, recall and PCKs of the gates kept at ``threshold`` and margin ``outside``."""
+def figures(
+    per_image: list[tuple],
+    threshold: float,
+    outside: float | None,
+    square: RefineConfig | None = None,
+) -> dict:
+    """Precision, recall and PCKs of the gates kept at ``threshold``, squareness setting
+    ``square`` (None: no check here) and margin ``outside``."""
     gts, preds = [], []
     for found, truth, size in per_image:
-        kept = in_frame([f for f in found if f[2] >= threshold], size, outside)
+        kept = [f for f in found if f[2] >= threshold]
+        if square is not None:
+            kept = keep_square(kept, size, square)
+        kept = in_frame(kept, size, outside)
         g, p = evaluate_image([(c, s) for c, _, s in kept], truth, MIN_GATE_PX)
         gts += g
         preds += p
@@ -106,29 +128,50 @@ def main(argv: list[str] | None = None) -> dict:
         default=[None, 0.5, 1.5, 3.0],
         help="out-of-frame margins, px ('none': no check)",
     )
+    ap.add_argument(
+        "--max-skew",
+        type=float,
+        nargs="+",
+        default=None,
+        help="squareness limits (0: no check; default: the checkpoint's)",
+    )
+    ap.add_argument(
+        "--skew-min-px",
+        type=float,
+        nargs="+",
+        default=None,
+        help="smallest gates checked for squareness, px (default: the checkpoint's)",
+    )
     ap.add_argument("--limit", type=int, default=None, help="Only the first N images of each.")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     path = Path(args.detector.partition(":")[2] or SHIPPED)
-    det, own = loose_detector(path, min(args.thresholds), args.backend)
+    det, own, square = loose_detector(path, min(args.thresholds), args.backend)
+    skews = args.max_skew or [own["max_skew"]]
+    mins = args.skew_min_px or [own["skew_min_px"]]
+    if square is None and (skews != [own["max_skew"]] or mins != [own["skew_min_px"]]):
+        sys.exit(f"{path}: its squareness check is not the last step (no zoom stage, or no "
+                 "check), so --max-skew and --skew-min-px cannot be varied")  # fmt: skip
     data = args.data or DATA
     runs = {str(d): detections(det, d, args.split, args.limit) for d in data}
     rows = []
-    for t, o in itertools.product(args.thresholds, args.outside):
-        per = {name: figures(r, t, o) for name, r in runs.items()}
+    for t, o, k, m in itertools.product(args.thresholds, args.outside, skews, mins):
+        sq = None if square is None else replace(square, max_skew=k, skew_min_px=m)
+        per = {name: figures(r, t, o, sq) for name, r in runs.items()}
         low = min(min(f["precision"] or 0, f["recall"] or 0, f["pck_5px"] or 0)
                   for f in per.values())  # fmt: skip
-        rows.append({"threshold": t, "max_outside_px": o, "min": round(low, 4), "by_data": per})
+        rows.append({"threshold": t, "max_outside_px": o, "max_skew": k, "skew_min_px": m,
+                     "min": round(low, 4), "by_data": per})  # fmt: skip
     rows.sort(key=lambda r: -r["min"])
+    keys = ("threshold", "max_outside_px", "max_skew", "skew_min_px")
     for r in rows:
-        mark = " (the checkpoint's)" if (r["threshold"], r["max_outside_px"]) == tuple(
-            own.values()) else ""  # fmt: skip
+        mark = " (the checkpoint's)" if all(r[k] == own[k] for k in keys) else ""
         cells = " | ".join(
             "{precision:.4f} / {recall:.4f} / {pck_2px:.4f} / {pck_5px:.4f}".format(**f)
             for f in r["by_data"].values()
         )
         print(f"threshold {r['threshold']:<5} outside {str(r['max_outside_px']):<4} "
-              f"min {r['min']:.4f} | {cells}{mark}")  # fmt: skip
+              f"skew {r['max_skew']:<4} from {r['skew_min_px']:<4} min {r['min']:.4f} | {cells}{mark}")  # fmt: skip
     out = {"detector": args.detector, "backend": det.backend, "split": args.split,
            "data": [str(d) for d in data], "own": own, "rows": rows}  # fmt: skip
     if args.json:

@@ -74,6 +74,12 @@ def train_refiner_cmd(
         help="A new run's training candidates overlapping a better one by more than this are "
         "dropped (0.85: as the shipped detector does).",
     ),
+    images_on_disk: bool = typer.Option(
+        False,
+        "--images-on-disk",
+        help="Keep a new run's training images in OUT/train-images.npy, mapped from disk, "
+        "instead of in memory (230 kB an image: for more images than memory holds).",
+    ),
 ) -> None:
     """Train the refiner: it rectifies each of the first stage's candidate gates into a small
     patch, decides whether it is a gate and corrects its corners.
@@ -98,7 +104,8 @@ def train_refiner_cmd(
         SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
         resume=resume,
         config=RefineTrainConfig(candidate_scale=candidate_scale, candidate_iou=candidate_iou,
-                                 lr=lr),
+                                 lr=lr,
+                                 images_on_disk=images_on_disk),
         refine_config=RefineConfig(
             patch=patch, margin=margin, widths=parse_widths(widths, 3), hidden=hidden,
             square_hfov_deg=square_hfov,

@@ -216,6 +216,37 @@ def test_several_datasets_load_as_one_split(tiny_dataset, tmp_path):
         load_splits([tiny_dataset, other], "train", (80, 60))
 
 
+def test_a_split_mapped_from_disk_holds_the_same_images_and_is_reused(tiny_dataset, tmp_path):
+    import os
+    import shutil
+
+    import cv2
+
+    data = tmp_path / "data"
+    shutil.copytree(tiny_dataset, data)
+    held = load_splits([data], "train", (80, 60))
+    npy = tmp_path / "cache" / "train.npy"
+    mapped = load_splits([data], "train", (80, 60), disk=npy)
+    assert isinstance(mapped.images, np.memmap) and not mapped.images.flags.writeable
+    np.testing.assert_array_equal(mapped.images, held.images)
+    written = npy.stat().st_mtime_ns
+    again = load_splits([data], "train", (80, 60), disk=npy)
+    assert npy.stat().st_mtime_ns == written  # the same images: read, not written again
+    np.testing.assert_array_equal(again.images, held.images)
+    # an image changed on disk: written again, with the new pixels
+    first = held.files[0]
+    flipped = cv2.imread(str(first))[::-1].copy()
+    cv2.imwrite(str(first), flipped)
+    os.utime(first, ns=(written + 10**9, written + 10**9))
+    fresh = load_splits([data], "train", (80, 60), disk=npy)
+    np.testing.assert_array_equal(fresh.images[0], load_split(data, "train", (80, 60)).images[0])
+    assert not np.array_equal(fresh.images[0], held.images[0])
+    # a corrupt cache file is written again, not trusted
+    npy.write_bytes(b"not an array")
+    np.testing.assert_array_equal(load_splits([data], "train", (80, 60), disk=npy).images[1:],
+                                  held.images[1:])  # fmt: skip
+
+
 def test_a_few_training_steps_lower_the_loss(tiny_dataset):
     torch.manual_seed(0)
     split = load_split(tiny_dataset, "train", TINY_MODEL.input_size)

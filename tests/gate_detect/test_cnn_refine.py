@@ -350,6 +350,21 @@ def test_a_new_run_can_start_from_a_checkpoints_refiner(tiny_dataset, tmp_path):
                          progress=False)  # fmt: skip
 
 
+def test_training_images_mapped_from_disk_train_the_same_refiner(tiny_dataset, tmp_path):
+    from safetensors.torch import load_file
+
+    first = _first_stage(tmp_path)
+    kw = {"refine_config": RefineConfig(patch=16, margin=4), "progress": False, "epochs": 1}
+    cfg = rt.RefineTrainConfig(batch_size=16, tune=False)
+    rt.train_refiner(first, tiny_dataset, tmp_path / "mem", config=cfg, **kw)
+    disk = replace(cfg, images_on_disk=True)
+    rt.train_refiner(first, tiny_dataset, tmp_path / "disk", config=disk, **kw)
+    assert (tmp_path / "disk" / rt.TRAIN_IMAGES).is_file()
+    assert not (tmp_path / "mem" / rt.TRAIN_IMAGES).exists()
+    a, b = (load_file(tmp_path / r / "last" / "refiner.safetensors") for r in ("mem", "disk"))
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
 def test_saved_candidates_are_read_back_only_for_the_same_key(tmp_path):
     cands = rt.Candidates(np.arange(3), np.random.rand(3, 4, 2), np.full((3, 4, 2), np.nan),
                           np.random.rand(3, 3).astype(np.float32), [])  # fmt: skip

@@ -2,10 +2,12 @@
 
 Images are resized once to the network input (INTER_AREA) when loaded; a 5,000-image split at
 160x120 takes about 300 MB. Keypoints stay in camera pixels (u, v) until a sample is drawn.
+Splits larger than memory can be kept in a ``.npy`` file mapped from disk (``disk``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +17,7 @@ import numpy as np
 from torch.utils.data import Dataset
 
 from icarus_vision.dataset.layout import SPLITS
+from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.augment import make_augment
 from icarus_vision.gate_detect.cnn.model import network_input
@@ -125,9 +128,12 @@ def load_splits(
     split: str,
     input_size: tuple[int, int] | None = None,
     limit: int | None = None,
+    disk: Path | None = None,
 ) -> Split:
     """:func:`load_split` of several datasets as one split (their cameras the same size). The
     images are read straight into one array: joining loaded splits would hold them twice.
+    With ``disk`` (a ``.npy`` path), that array is a read-only file mapped from disk
+    (:func:`mapped_images`), for splits larger than memory.
 
     Raises:
         ValueError: datasets of different image sizes, or as :func:`load_split`.
@@ -137,7 +143,12 @@ def load_splits(
     if len(sizes) != 1:
         raise ValueError(f"datasets of different image sizes cannot be combined: {sorted(sizes)}")
     files = [f for s in parts for f in s.files]
-    return Split(files, _read_images(files, input_size), [g for s in parts for g in s.gates],
+    images = (
+        mapped_images(files, input_size, disk)
+        if disk is not None and input_size is not None
+        else _read_images(files, input_size)
+    )
+    return Split(files, images, [g for s in parts for g in s.gates],
                  [i for s in parts for i in s.image_info], parts[0].image_size)  # fmt: skip
 
 
@@ -152,6 +163,36 @@ def _read_images(files: list[Path], input_size: tuple[int, int] | None) -> np.nd
     for i, f in enumerate(files):
         images[i] = network_input(read_rgb(f), input_size)
     return images
+
+
+def mapped_images(files: list[Path], input_size: tuple[int, int], path: Path) -> np.ndarray:
+    """(N, h, w, 3) uint8 images at ``input_size``, read-only, mapped from the ``.npy`` file
+    ``path``: written once (atomically; a JSON file beside it records which images, in which
+    order, at which size and when they were modified), then reused while that record holds."""
+    path = Path(path)
+    record = path.with_suffix(".json")
+    digest = hashlib.sha256()
+    for f in files:
+        if not f.is_file():
+            raise FileNotFoundError(f"{f}: image file not found")
+        digest.update(f"{f}\0{f.stat().st_mtime_ns}\0".encode())
+    key = {"images": len(files), "size": list(input_size), "files": digest.hexdigest()}
+    try:
+        if path.is_file() and json.loads(record.read_text()) == key:
+            return np.load(path, mmap_mode="r")
+    except (OSError, ValueError):
+        pass  # unreadable: write it again
+    record.unlink(missing_ok=True)
+    with atomic_path(path, suffix=".npy") as tmp:
+        out = np.lib.format.open_memmap(
+            tmp, mode="w+", dtype=np.uint8, shape=(len(files), input_size[1], input_size[0], 3)
+        )
+        for i, f in enumerate(files):
+            out[i] = network_input(read_rgb(f), input_size)
+        out.flush()
+        del out
+    atomic_write_json(record, key)
+    return np.load(path, mmap_mode="r")
 
 
 class GateDataset(Dataset):
