@@ -159,9 +159,14 @@ def _read_images(files: list[Path], input_size: tuple[int, int] | None) -> np.nd
             if not f.is_file():
                 raise FileNotFoundError(f"{f}: image file not found")
         return None
-    images = np.empty((len(files), input_size[1], input_size[0], 3), np.uint8)
+    return _fill(np.empty((len(files), input_size[1], input_size[0], 3), np.uint8), files)
+
+
+def _fill(images: np.ndarray, files: list[Path]) -> np.ndarray:
+    """``images`` (N, h, w, 3) filled with the N image files, resized to (w, h)."""
+    size = (images.shape[2], images.shape[1])
     for i, f in enumerate(files):
-        images[i] = network_input(read_rgb(f), input_size)
+        images[i] = network_input(read_rgb(f), size)
     return images
 
 
@@ -172,9 +177,7 @@ def mapped_images(files: list[Path], input_size: tuple[int, int], path: Path) ->
     path = Path(path)
     record = path.with_suffix(".json")
     digest = hashlib.sha256()
-    for f in files:
-        if not f.is_file():
-            raise FileNotFoundError(f"{f}: image file not found")
+    for f in files:  # load_split has checked that each exists
         digest.update(f"{f}\0{f.stat().st_mtime_ns}\0".encode())
     key = {"images": len(files), "size": list(input_size), "files": digest.hexdigest()}
     try:
@@ -187,9 +190,7 @@ def mapped_images(files: list[Path], input_size: tuple[int, int], path: Path) ->
         out = np.lib.format.open_memmap(
             tmp, mode="w+", dtype=np.uint8, shape=(len(files), input_size[1], input_size[0], 3)
         )
-        for i, f in enumerate(files):
-            out[i] = network_input(read_rgb(f), input_size)
-        out.flush()
+        _fill(out, files).flush()
         del out
     atomic_write_json(record, key)
     return np.load(path, mmap_mode="r")

@@ -121,9 +121,9 @@ def first_stage(
     h, w = images.shape[1:3]
     with torch.inference_mode():
         for i in range(0, len(images), batch):
-            x = np.array(images[i : i + batch])  # a copy: the images may be mapped read-only
-            if input_size is not None:
-                x = np.stack([network_input(im, input_size) for im in x])
+            x = images[i : i + batch]
+            # resized, or copied: the images may be mapped read-only
+            x = np.stack([network_input(im, input_size) for im in x]) if input_size else np.array(x)
             maps = model(torch.from_numpy(x).permute(0, 3, 1, 2).float() / 255.0)
             for m in maps:
                 out.append(
