@@ -17,10 +17,11 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-import cv2
 import numpy as np
 import torch
 from torch import nn
+
+from icarus_vision.gate_detect.cnn.resize import area_resize
 
 NUM_OUT = 15
 """Output channels: centre heatmap, 4 corner heatmaps, 2 offsets, 8 centre-to-corner vectors."""
@@ -76,11 +77,12 @@ class ModelConfig:
 
 def network_input(image: np.ndarray, input_size: tuple[int, int]) -> np.ndarray:
     """(H, W, 3) frame as the corner network reads it: resized to ``input_size`` (W, H) with
-    ``INTER_AREA``, as it is if already that size (training, validation, tuning and the
-    detector all read frames through this)."""
+    ``INTER_AREA`` (by :func:`~icarus_vision.gate_detect.cnn.resize.area_resize`: the same
+    output, faster at 5:4), as it is if already that size (training, validation, tuning and
+    the detector all read frames through this)."""
     if image.shape[1::-1] == tuple(input_size):
         return image
-    return cv2.resize(image, tuple(input_size), interpolation=cv2.INTER_AREA)
+    return area_resize(image, input_size)
 
 
 def to_float(images: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
