@@ -39,8 +39,9 @@ def quantize_detector_cmd(
     """Add int8 copies of a CNN detector's networks (ONNX Runtime static quantization).
 
     The float32 detector runs on the calibration frames; what each network reads there sets the
-    int8 activation ranges. The first and output layers stay float32. `eval-detector` and `race`
-    run the int8 copies where the CPU has 8-bit dot products (VNNI or AMX), else float32.
+    int8 activation ranges; weights have 7 bits, so that CPUs without 8-bit dot products sum
+    them exactly. The first and output layers stay float32. `eval-detector` and `race` run the
+    int8 copies on x86 CPUs with AVX2, VNNI or AMX, else float32.
     """
     from icarus_vision.gate_detect.cnn.quantize import quantize_detector
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 from safetensors.torch import load_file, save_file
+from torch import nn
 from typer.testing import CliRunner
 
 import icarus_vision.gate_detect.cnn as cnn
@@ -18,12 +19,13 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
     INT8,
     load_checkpoint,
     load_refiner,
+    onnx_bytes,
     save_checkpoint,
 )
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet
-from icarus_vision.gate_detect.cnn.quantize import calibration_inputs, layer_nodes
+from icarus_vision.gate_detect.cnn.quantize import calibration_inputs, layer_nodes, quantize_network
 from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
 from icarus_vision.gate_detect.cnn.zoom import ZoomConfig, ZoomNet
 
@@ -68,6 +70,7 @@ def test_quantize_detector_writes_a_checkpoint_with_int8_networks(quantized, tin
     assert sorted(meta["networks"]) == ["model", "refiner", "zoom"]
     assert meta["calibration"] == {"data": [str(tiny_dataset)], "split": "val", "images": 3,
                                    "seed": 2}  # fmt: skip
+    assert meta["weight_bits"] == 7
     # the first and output layers stay float32 (this corner network has no stem)
     assert meta["float_layers"] == {"model": ["enc1.0", "lat1", "up1", "out"],
                                     "refiner": ["features.0", "out"], "zoom": ["features.0", "head.3"]}  # fmt: skip
@@ -87,9 +90,35 @@ def test_int8_networks_read_as_the_float_ones(quantized, tiny_dataset):
         for batch in inputs[name]:
             x, y = a.run(*batch), b.run(*batch)
             assert not np.array_equal(x, y) and x.shape == y.shape  # it is another network...
-            if cnn.native_int8():  # (without VNNI, ONNX Runtime's int8 sums can saturate)
-                # ... within a few per cent of the outputs' range (8-bit steps, several layers)
+            if cnn.int8_runs_exactly(7):  # (else ONNX Runtime's int8 sums can saturate)
+                # ... within a few per cent of the outputs' range (7-bit steps, several layers)
                 assert np.abs(x - y).max() <= 0.05 * (np.ptp(x) + 1e-6), name
+
+
+@pytest.mark.skipif(not cnn.int8_runs_exactly(7), reason="a CPU without AVX2 or VNNI")
+def test_int8_kernels_sum_without_saturating():
+    """ONNX Runtime's fused int8 kernels compute what the same quantized graph computes unfused
+    (dequantized to float32, node by node), even where inputs and weights are all at the top of
+    their ranges: with 8-bit weights, pairs of products overflow AVX2's 16-bit sums here."""
+    import onnxruntime as ort
+
+    net = nn.Sequential(nn.Conv2d(16, 8, 1), nn.ReLU(), nn.Conv2d(8, 4, 1)).eval()
+    with torch.no_grad():
+        net[0].weight.fill_(1.0)
+        net[0].bias.zero_()
+    x = np.ones((2, 16, 8, 8), np.float32)
+    x[1] *= np.random.default_rng(0).uniform(0.9, 1.0, (16, 8, 8)).astype(np.float32)
+    model = onnx_bytes(net, (torch.from_numpy(x),), input_names=["input0"],
+                       output_names=["output"], dynamic_axes={"input0": {0: "n"}})  # fmt: skip
+    int8 = quantize_network(model, [[x]], [])
+    outs = []
+    for level in (ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
+                  ort.GraphOptimizationLevel.ORT_DISABLE_ALL):  # fmt: skip
+        opts = ort.SessionOptions()
+        opts.graph_optimization_level = level
+        session = ort.InferenceSession(int8, opts, providers=["CPUExecutionProvider"])
+        outs.append(session.run(None, {"input0": x})[0])
+    np.testing.assert_allclose(outs[0], outs[1], atol=1e-3 * np.ptp(outs[1]))
 
 
 def test_same_seed_same_int8_networks_and_another_seed_other_frames(quantized, tiny_dataset,
@@ -106,13 +135,33 @@ def test_same_seed_same_int8_networks_and_another_seed_other_frames(quantized, t
     assert (tmp_path / "b" / INT8["model"]).read_bytes() != (out / INT8["model"]).read_bytes()
 
 
-def test_auto_runs_int8_only_where_the_cpu_has_8_bit_dot_products(quantized, monkeypatch):
+def test_auto_runs_int8_only_where_the_cpu_sums_exactly(quantized, monkeypatch, tmp_path):
     _, out = quantized
     monkeypatch.setattr(cnn, "native_int8", lambda: True)
+    monkeypatch.setattr(cnn, "has_avx2", lambda: False)
     assert CnnDetector.load(out).backend == "int8"
     assert CnnDetector.load(out, bf16=True).backend == "torch"
     monkeypatch.setattr(cnn, "native_int8", lambda: False)
     assert CnnDetector.load(out).backend == "onnxruntime"
+    monkeypatch.setattr(cnn, "has_avx2", lambda: True)  # 7-bit weights: exact with AVX2
+    assert CnnDetector.load(out).backend == "int8"
+    # copies with 8-bit weights (made before quantize-detector recorded their bits) could
+    # saturate there: float32
+    eight = tmp_path / "eight"
+    eight.mkdir()
+    for f in out.iterdir():
+        (eight / f.name).write_bytes(f.read_bytes())
+    meta = json.loads((eight / "detector.json").read_text())
+    del meta["int8"]["weight_bits"]
+    (eight / "detector.json").write_text(json.dumps(meta))
+    assert CnnDetector.load(eight).backend == "onnxruntime"
+    monkeypatch.setattr(cnn, "native_int8", lambda: True)
+    assert CnnDetector.load(eight).backend == "int8"
+    monkeypatch.setattr(cnn, "native_int8", lambda: False)
+    meta["int8"]["weight_bits"] = "7"
+    (eight / "detector.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="weight_bits"):
+        CnnDetector.load(eight)
     src, _ = quantized
     monkeypatch.setattr(cnn, "native_int8", lambda: True)  # no int8 copies: float32
     assert CnnDetector.load(src).backend == "onnxruntime"

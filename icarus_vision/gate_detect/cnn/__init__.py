@@ -91,10 +91,23 @@ def native_bf16() -> bool:
 @functools.cache
 def native_int8() -> bool:
     """Whether this CPU has 8-bit dot products (AVX512-VNNI, AVX-VNNI or AMX; Linux
-    /proc/cpuinfo). Without them ONNX Runtime's int8 kernels can saturate intermediate sums
-    (its quantization documentation advises 7-bit weights there), so ``auto`` stays in float32."""
+    /proc/cpuinfo): ONNX Runtime's int8 kernels then sum in 32 bits."""
     flags = _cpu_flags()
     return any(f in flags for f in ("avx512_vnni", "avx_vnni", "amx_int8"))
+
+
+@functools.cache
+def has_avx2() -> bool:
+    """Whether this CPU has AVX2 (Linux /proc/cpuinfo): ONNX Runtime's int8 kernels there add
+    pairs of products in 16 bits, exact only for weights of at most 7 bits (``quantize.py``)."""
+    return "avx2" in _cpu_flags().split()
+
+
+def int8_runs_exactly(weight_bits: int) -> bool:
+    """Whether this CPU computes int8 copies with ``weight_bits``-bit weights without
+    saturating a sum: with 8-bit dot products any, with AVX2 7-bit ones. ``auto`` runs int8
+    only then (else float32), so the detector's output is the same on every such CPU."""
+    return native_int8() or (weight_bits <= 7 and has_avx2())
 
 
 class CnnDetector(Detector):
@@ -118,12 +131,14 @@ class CnnDetector(Detector):
         backend: "torch" (PyTorch, frozen when ``frozen``), "onnxruntime" (the networks
             exported to ONNX when the detector is built, about a second, and run by ONNX
             Runtime in float32), "int8" (ONNX Runtime running the int8 copies in ``int8``) or
-            "auto": "torch" when ``bf16`` is True, else "int8" where there are int8 copies and
-            the CPU has 8-bit dot products (:func:`native_int8`), else "onnxruntime" (README:
+            "auto": "torch" when ``bf16`` is True, else "int8" where there are int8 copies the
+            CPU computes exactly (:func:`int8_runs_exactly`), else "onnxruntime" (README:
             Detection, for what each costs).
         int8: int8 ONNX copies of the networks by name (``model``, ``refiner``, ``zoom``; from
             ``quantize.py`` via :func:`~icarus_vision.gate_detect.cnn.checkpoint.load_int8`),
             each for the network of the same weights passed here.
+        int8_weight_bits: bits of those copies' weights (the checkpoint's ``int8`` section
+            records them; copies made before it did have 8).
         zoom: a trained third stage (:class:`ZoomNet`): it reads each corner of every reported
             gate at least ``zoom.cfg.min_side_px`` across again, zoomed in, and moves it. It
             runs as the refiner does. The refiner's squareness check (``max_skew``) then takes
@@ -144,6 +159,7 @@ class CnnDetector(Detector):
         backend: str = "auto",
         zoom: ZoomNet | None = None,
         int8: dict[str, bytes] | None = None,
+        int8_weight_bits: int = 8,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -167,7 +183,7 @@ class CnnDetector(Detector):
         if backend == "auto":
             if bf16:
                 backend = "torch"
-            elif needed <= set(int8 or {}) and native_int8():
+            elif needed <= set(int8 or {}) and int8_runs_exactly(int8_weight_bits):
                 backend = "int8"
             else:
                 backend = "onnxruntime"
@@ -251,7 +267,9 @@ class CnnDetector(Detector):
         model, decode_cfg, meta = load_checkpoint(path)
         refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
         int8 = load_int8(path, meta)
-        return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=int8, **settings)
+        bits = meta["int8"].get("weight_bits", 8) if int8 else 8
+        return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=int8,
+                   int8_weight_bits=bits, **settings)  # fmt: skip
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""

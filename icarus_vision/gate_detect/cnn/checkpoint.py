@@ -205,6 +205,9 @@ def load_int8(path: str | Path, meta: dict) -> dict[str, bytes] | None:
                    for name in networks}  # fmt: skip
         if not set(entries) <= set(INT8):
             raise ValueError(f"unknown networks {sorted(set(entries) - set(INT8))}")
+        bits = meta["int8"].get("weight_bits", 8)
+        if type(bits) is not int or not 2 <= bits <= 8:
+            raise ValueError(f"weight_bits must be an integer from 2 to 8, got {bits!r}")
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"{folder / CONFIG}: not a valid int8 section ({e})") from None
     models = {}

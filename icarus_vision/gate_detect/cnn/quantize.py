@@ -2,8 +2,13 @@
 
 Each network (the corner network, the refiner, the zoom stage) is exported to ONNX in float32
 (batch norm folded) and quantized by ``onnxruntime.quantization.quantize_static``: weights to
-int8 per output channel, activations to uint8 with ranges seen on calibration inputs (min-max),
-in the QDQ format that ONNX Runtime fuses into int8 kernels. The calibration inputs are what
+7-bit integers per output channel, activations to uint8 with ranges seen on calibration inputs
+(min-max), in the QDQ format that ONNX Runtime fuses into int8 kernels. The 7 bits are for CPUs
+without 8-bit dot products (VNNI, AMX): there ONNX Runtime's AVX2 kernels add pairs of
+uint8 x int8 products in 16 bits, which 8-bit weights can overflow (255 x 127 x 2 > 32,767; its
+quantization guide advises ``reduce_range``), and did in the refiner (outputs off by up to 1.7
+against the same graph computed unfused; 0.04 with 7 bits). With 7 bits no sum saturates, so
+every x86 CPU with AVX2 computes the same sums as one with VNNI. The calibration inputs are what
 each network reads while the float32 detector runs on a dataset's frames, so the refiner and
 the zoom stage are calibrated on real candidates and corners.
 
@@ -53,6 +58,10 @@ def float_layers(net: nn.Module, name: str) -> list[str]:
     return [m for m in FLOAT_LAYERS[name]
             if m in modules and next(modules[m].parameters(), None) is not None]  # fmt: skip
 
+
+WEIGHT_BITS = 7
+"""Bits of the quantized weights (``reduce_range``: module docstring); recorded in the
+checkpoint's ``int8`` section, where ``CnnDetector`` reads where the copies can run."""
 
 METHOD = "MinMax"
 """How activation ranges are calibrated (``onnxruntime.quantization.CalibrationMethod``)."""
@@ -117,7 +126,7 @@ def layer_nodes(model: bytes, modules: Sequence[str]) -> list[str]:
 def quantize_network(
     model: bytes, batches: list[list[np.ndarray]], float_layers: Sequence[str]
 ) -> bytes:
-    """The float32 ONNX ``model`` quantized to int8 (QDQ; weights per channel), activation
+    """The float32 ONNX ``model`` quantized to int8 (QDQ; 7-bit weights per channel), activation
     ranges from ``batches`` of its inputs, the nodes of ``float_layers`` left in float32."""
     import onnx
     from onnxruntime.quantization import (
@@ -150,7 +159,7 @@ def quantize_network(
             quantize_static(
                 src, dst, Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
                 activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                calibrate_method=getattr(CalibrationMethod, METHOD),
+                reduce_range=WEIGHT_BITS < 8, calibrate_method=getattr(CalibrationMethod, METHOD),
                 nodes_to_exclude=layer_nodes(model, float_layers),
                 extra_options={"CalibMaxIntermediateOutputs": 64},  # bounds calibration's memory
             )  # fmt: skip
@@ -225,8 +234,9 @@ def quantize_detector(
     import onnxruntime
 
     record = {
-        "method": f"onnxruntime static quantization, QDQ, int8 weights per channel, uint8 "
-        f"activations ({METHOD} calibration)",
+        "method": f"onnxruntime static quantization, QDQ, {WEIGHT_BITS}-bit weights per "
+        f"channel (reduce_range), uint8 activations ({METHOD} calibration)",
+        "weight_bits": WEIGHT_BITS,
         "onnxruntime": onnxruntime.__version__,
         "calibration": {
             "data": [str(d) for d in data],
