@@ -25,6 +25,7 @@ from torch import nn
 from icarus_vision.gate_detect.base import Detector, GateDetection, validate_image
 from icarus_vision.gate_detect.cnn.checkpoint import (
     SHIPPED,
+    int8_weight_bits,
     load_checkpoint,
     load_int8,
     load_refiner,
@@ -267,7 +268,7 @@ class CnnDetector(Detector):
         model, decode_cfg, meta = load_checkpoint(path)
         refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
         int8 = load_int8(path, meta)
-        bits = meta["int8"].get("weight_bits", 8) if int8 else 8
+        bits = int8_weight_bits(meta) if int8 else 8
         return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=int8,
                    int8_weight_bits=bits, **settings)  # fmt: skip
 

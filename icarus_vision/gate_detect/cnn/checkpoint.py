@@ -186,6 +186,12 @@ def save_int8(folder: str | Path, models: dict[str, bytes], record: dict) -> Non
     atomic_write_json(folder / CONFIG, meta)
 
 
+def int8_weight_bits(meta: dict) -> int:
+    """Bits of the weights of a checkpoint's int8 copies (its JSON ``meta`` has an ``int8``
+    section; copies made before it recorded them have 8). :func:`load_int8` checks the value."""
+    return meta["int8"].get("weight_bits", 8)
+
+
 def load_int8(path: str | Path, meta: dict) -> dict[str, bytes] | None:
     """The int8 ONNX copies of the checkpoint's networks, by name; None if it has none.
 
@@ -205,7 +211,7 @@ def load_int8(path: str | Path, meta: dict) -> dict[str, bytes] | None:
                    for name in networks}  # fmt: skip
         if not set(entries) <= set(INT8):
             raise ValueError(f"unknown networks {sorted(set(entries) - set(INT8))}")
-        bits = meta["int8"].get("weight_bits", 8)
+        bits = int8_weight_bits(meta)
         if type(bits) is not int or not 2 <= bits <= 8:
             raise ValueError(f"weight_bits must be an integer from 2 to 8, got {bits!r}")
     except (KeyError, TypeError, ValueError) as e:
