@@ -121,6 +121,44 @@ def test_int8_kernels_sum_without_saturating():
     np.testing.assert_allclose(outs[0], outs[1], atol=1e-3 * np.ptp(outs[1]))
 
 
+class _Normalised(nn.Module):
+    """A convolution reading its input normalised in the graph (so, in an int8 copy, a
+    dequantized input), as the zoom stage's first layer does, then int8-able layers."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.first = nn.Sequential(nn.Conv2d(3, 4, 3, padding=1), nn.ReLU())
+        self.rest = nn.Sequential(nn.Conv2d(4, 4, 1), nn.ReLU(), nn.Conv2d(4, 4, 1))
+
+    def forward(self, x):
+        return self.rest(self.first((x - 0.5) * 2.0))
+
+
+def test_a_layer_kept_float32_stays_float32_in_onnx_runtime():
+    """A layer an int8 copy keeps in float32 is computed in float32 by the detector's runtime,
+    even where it reads a dequantized input and feeds a quantized output (where ONNX Runtime's
+    own optimizations would quantize its weights). Here one huge weight reads a channel that is
+    always 0: harmless in float32, but quantized to 8 bits with it, every other weight becomes 0."""
+    import onnxruntime as ort
+
+    torch.manual_seed(0)
+    net = _Normalised().eval()
+    with torch.no_grad():
+        net.first[0].weight[:, 2] = 1000.0
+    x = np.random.default_rng(0).uniform(0, 1, (2, 3, 8, 8)).astype(np.float32)
+    x[:, 2] = 0.5  # normalised to 0
+    model = onnx_bytes(net, (torch.from_numpy(x),), input_names=["input0"],
+                       output_names=["output"], dynamic_axes={"input0": {0: "n"}})  # fmt: skip
+    int8 = quantize_network(model, [[x]], ["first"])
+    opts = ort.SessionOptions()
+    opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
+    unfused = ort.InferenceSession(int8, opts, providers=["CPUExecutionProvider"])
+    expected = unfused.run(None, {"input0": x})[0]
+    assert np.ptp(expected) > 0.1
+    got = OnnxRuntimeNet.from_onnx(int8, threads=1).run(x)
+    np.testing.assert_allclose(got, expected, atol=0.02 * np.ptp(expected))
+
+
 def test_same_seed_same_int8_networks_and_another_seed_other_frames(quantized, tiny_dataset,
                                                                     tmp_path):  # fmt: skip
     src, out = quantized

@@ -12,6 +12,15 @@ import numpy as np
 import torch
 from torch import nn
 
+DISABLED = ["WeightBiasQuantization"]
+"""ONNX Runtime graph optimizations not applied. ``WeightBiasQuantization`` quantizes the float32
+weights of a convolution that reads a dequantized input and feeds a quantized output, per
+tensor and to the full 8 bits: it made int8 the layers an int8 copy keeps in float32
+(``quantize.FLOAT_LAYERS``: the zoom stage's first layer, the corner network's ``lat1``), and
+on CPUs without VNNI its 8-bit weights can overflow the AVX2 kernels' 16-bit sums (the zoom
+stage's outputs were off by up to 0.017 against the same graph computed unfused; 0.0005
+without it)."""
+
 
 class OnnxRuntimeNet:
     """A network exported to ONNX and run by ONNX Runtime on the CPU: :meth:`run` takes and
@@ -56,7 +65,9 @@ class OnnxRuntimeNet:
         if threads is not None:
             opts.intra_op_num_threads = threads
             opts.inter_op_num_threads = 1
-        self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+        self._session = ort.InferenceSession(
+            model, opts, providers=["CPUExecutionProvider"], disabled_optimizers=DISABLED
+        )
         self._names = [i.name for i in self._session.get_inputs()]
 
     def run(self, *inputs: np.ndarray) -> np.ndarray:
