@@ -31,6 +31,7 @@ import numpy as np
 
 from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.cnn import cpu_description
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.evaluate import eval_detector, one_thread
 
@@ -80,7 +81,8 @@ def main(argv: list[str] | None = None) -> dict:
     args = ap.parse_args(argv)
     if not (args.data / "annotations" / "test.json").is_file():
         sys.exit(f"{args.data}: no dataset; generate it first (see this script's docstring)")
-    out = {"data": str(args.data), "load_avg_1min": round(os.getloadavg()[0], 2), "detectors": {}}
+    out = {"data": str(args.data), "cpu": cpu_description(),
+           "load_avg_1min": round(os.getloadavg()[0], 2), "detectors": {}}  # fmt: skip
     for spec in args.detectors:
         r = eval_detector(args.data, spec, limit=args.limit)
         keep = ("images", "gates", "min_gate_px", "precision", "recall", "corner_error_px", "pck",
@@ -101,6 +103,7 @@ def main(argv: list[str] | None = None) -> dict:
                 b: {"median_of_medians": round(float(np.median(v)), 3), "runs": v}
                 for b, v in runs.items()
             }
+    print(f"CPU: {out['cpu']}")
     print(f"{'detector':10} {'gates':>6} {'prec':>6} {'recall':>6} {'med px':>7} {'mean px':>7} "
           f"{'PCK2':>6} {'PCK5':>6} {'ms p50':>7} {'ms p95':>7}")  # fmt: skip
     for spec, r in out["detectors"].items():

@@ -45,6 +45,7 @@ from torch.utils.flop_counter import FlopCounterMode
 
 from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect import make_detector
+from icarus_vision.gate_detect.cnn import cpu_description
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.decode import decode
 from icarus_vision.gate_detect.cnn.model import network_input, to_float
@@ -201,6 +202,7 @@ def main(argv: list[str] | None = None) -> dict:
         "detector": args.detector,
         "frames": len(images),
         "runs": args.runs,
+        "cpu": cpu_description(),
         "load_avg_1min": round(os.getloadavg()[0], 2),
         "backend": det.backend,
         "bf16": det.bf16,

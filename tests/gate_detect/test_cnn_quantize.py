@@ -293,3 +293,15 @@ def test_another_checkpoint_in_out_is_refused_not_overwritten(quantized, tiny_da
     assert {f.name: f.read_bytes() for f in other.iterdir()} == before
     res = _quantize(other, tiny_dataset, other, "--images", "2")  # in place: allowed
     assert res.exit_code == 0, res.output
+
+
+def test_cpu_description_names_the_model_and_the_int8_kernels(monkeypatch):
+    info = "processor\t: 0\nmodel name\t: Test CPU 9000\nflags\t\t: fpu avx2\n" * 2
+    monkeypatch.setattr(cnn, "_cpu_flags", lambda: info)
+    monkeypatch.setattr(cnn, "native_int8", lambda: False)
+    monkeypatch.setattr(cnn, "has_avx2", lambda: True)
+    assert cnn.cpu_description() == "Test CPU 9000 (2 cores; int8: AVX2)"
+    monkeypatch.setattr(cnn, "native_int8", lambda: True)
+    assert cnn.cpu_description().endswith("int8: VNNI/AMX)")
+    monkeypatch.setattr(cnn, "_cpu_flags", lambda: "")
+    assert cnn.cpu_description().startswith("unknown CPU (? cores")

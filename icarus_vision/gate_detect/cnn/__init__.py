@@ -104,6 +104,16 @@ def has_avx2() -> bool:
     return "avx2" in _cpu_flags().split()
 
 
+def cpu_description() -> str:
+    """This CPU's model name and what its int8 kernels use (VNNI or AMX, AVX2, neither), for
+    benchmark reports: the detector's speed depends on both (Linux /proc/cpuinfo; "unknown CPU"
+    elsewhere)."""
+    names = [line.split(":", 1)[1].strip() for line in _cpu_flags().splitlines()
+             if line.startswith("model name")]  # fmt: skip
+    kernels = "VNNI/AMX" if native_int8() else "AVX2" if has_avx2() else "no AVX2"
+    return f"{names[0] if names else 'unknown CPU'} ({len(names) or '?'} cores; int8: {kernels})"
+
+
 def int8_runs_exactly(weight_bits: int) -> bool:
     """Whether this CPU computes int8 copies with ``weight_bits``-bit weights without
     saturating a sum: with 8-bit dot products any, with AVX2 7-bit ones. ``auto`` runs int8
