@@ -34,6 +34,7 @@ from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.cnn import CnnDetector
 from icarus_vision.gate_detect.cnn.checkpoint import (
     SHIPPED,
+    int8_weight_bits,
     load_checkpoint,
     load_int8,
     load_refiner,
@@ -68,9 +69,10 @@ def loose_detector(
     zoom = load_zoom(path, meta)
     late = zoom is not None and own_cfg.max_skew > 0
     refiner.cfg = replace(own_cfg, threshold=floor, max_skew=0.0 if late else own_cfg.max_skew)
+    int8 = load_int8(path, meta)
     det = CnnDetector(
-        model, replace(decode_cfg, max_outside_px=None), refiner=refiner,
-        zoom=zoom, int8=load_int8(path, meta), backend=backend,
+        model, replace(decode_cfg, max_outside_px=None), refiner=refiner, zoom=zoom, int8=int8,
+        int8_weight_bits=int8_weight_bits(meta) if int8 else 8, backend=backend,
     )  # fmt: skip
     return det, own, own_cfg if late else None
 
@@ -164,6 +166,7 @@ def main(argv: list[str] | None = None) -> dict:
                      "min": round(low, 4), "by_data": per})  # fmt: skip
     rows.sort(key=lambda r: -r["min"])
     keys = ("threshold", "max_outside_px", "max_skew", "skew_min_px")
+    print(f"{args.detector} on {det.backend}, {args.split} splits")
     for r in rows:
         mark = " (the checkpoint's)" if all(r[k] == own[k] for k in keys) else ""
         cells = " | ".join(
