@@ -72,7 +72,7 @@ def loose_detector(
     int8 = load_int8(path, meta)
     det = CnnDetector(
         model, replace(decode_cfg, max_outside_px=None), refiner=refiner, zoom=zoom, int8=int8,
-        int8_weight_bits=int8_weight_bits(meta) if int8 else 8, backend=backend,
+        int8_weight_bits=int8_weight_bits(meta) if int8 else None, backend=backend,
     )  # fmt: skip
     return det, own, own_cfg if late else None
 

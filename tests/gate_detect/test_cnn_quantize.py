@@ -305,3 +305,10 @@ def test_cpu_description_names_the_model_and_the_int8_kernels(monkeypatch):
     assert cnn.cpu_description().endswith("int8: VNNI/AMX)")
     monkeypatch.setattr(cnn, "_cpu_flags", lambda: "")
     assert cnn.cpu_description().startswith("unknown CPU (? cores")
+
+
+def test_int8_copies_without_their_weight_bits_are_refused():
+    """auto decides by the bits whether this CPU computes the copies exactly, so a detector built
+    from parts must be told them (a benchmark that was not ran float32 on AVX2 CPUs)."""
+    with pytest.raises(ValueError, match="int8_weight_bits"):
+        CnnDetector(CornerNet(TINY_MODEL).eval(), int8={"model": b"not read"})

@@ -149,7 +149,9 @@ class CnnDetector(Detector):
             ``quantize.py`` via :func:`~icarus_vision.gate_detect.cnn.checkpoint.load_int8`),
             each for the network of the same weights passed here.
         int8_weight_bits: bits of those copies' weights (the checkpoint's ``int8`` section
-            records them; copies made before it did have 8).
+            records them, :func:`~icarus_vision.gate_detect.cnn.checkpoint.int8_weight_bits`;
+            copies made before it did have 8). Required with ``int8``: ``auto`` decides by it
+            whether this CPU computes the copies exactly.
         zoom: a trained third stage (:class:`ZoomNet`): it reads each corner of every reported
             gate at least ``zoom.cfg.min_side_px`` across again, zoomed in, and moves it. It
             runs as the refiner does. The refiner's squareness check (``max_skew``) then takes
@@ -170,10 +172,15 @@ class CnnDetector(Detector):
         backend: str = "auto",
         zoom: ZoomNet | None = None,
         int8: dict[str, bytes] | None = None,
-        int8_weight_bits: int = 8,
+        int8_weight_bits: int | None = None,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        if int8 and int8_weight_bits is None:
+            raise ValueError(
+                "int8 copies need int8_weight_bits (checkpoint.int8_weight_bits of the "
+                "checkpoint's metadata): auto runs them only where the CPU computes them exactly"
+            )
         needed = {"model"} | {k for k, v in (("refiner", refiner), ("zoom", zoom)) if v is not None}
         if backend == "int8" and not needed <= set(int8 or {}):
             raise ValueError(
@@ -278,7 +285,7 @@ class CnnDetector(Detector):
         model, decode_cfg, meta = load_checkpoint(path)
         refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
         int8 = load_int8(path, meta)
-        bits = int8_weight_bits(meta) if int8 else 8
+        bits = int8_weight_bits(meta) if int8 else None
         return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=int8,
                    int8_weight_bits=bits, **settings)  # fmt: skip
 
