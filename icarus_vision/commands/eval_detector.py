@@ -91,7 +91,8 @@ def eval_detector_cmd(
         spans = ", ".join(f"{v} {ci[k][0]:.3f}-{ci[k][1]:.3f}" for k, v in names.items() if ci[k])
         console.print(f"95 % intervals (bootstrap over images): {spans}", highlight=False)
     backend = f", {r['backend']}" if r["backend"] else ""
-    console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core{backend})", highlight=False)
+    console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core{backend}; {r['cpu']})",
+                  highlight=False)  # fmt: skip
     if r["error_model_path"]:
         console.print(f"error model written to {escape(r['error_model_path'])}", highlight=False)
     if r["examples_path"]:

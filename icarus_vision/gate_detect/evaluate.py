@@ -85,7 +85,8 @@ def eval_detector(
         the report: detector, backend (a CNN's: what ran its networks), images, gates, min_gate_px, precision, recall, corner_error_px
         {mean, median}, pck {2px, 5px}, confidence (95 % bootstrap intervals of those figures
         over the test images: :func:`~icarus_vision.gate_detect.metrics.confidence`),
-        ms_per_frame, by_distance, by_size, matching_rule, error_model (the model itself) and
+        ms_per_frame (and its median, and the ``cpu`` it ran on), by_distance, by_size,
+        matching_rule, error_model (the model itself) and
         error_model_path.
 
     Raises:
@@ -125,6 +126,8 @@ def eval_detector(
                 tiles.append(draw_detections(image, found, [t[0] for t in truth]))
             if progress is not None:
                 progress(i + 1, n)
+    from icarus_vision.gate_detect.cnn import cpu_description
+
     report = {
         "detector": detector_spec,
         "backend": getattr(detector, "backend", None),
@@ -137,6 +140,7 @@ def eval_detector(
         ),
         "ms_per_frame": round(1000.0 * float(np.mean(times[1:] or times)), 3),
         "ms_per_frame_median": round(1000.0 * float(np.median(times)), 3),
+        "cpu": cpu_description(),
         "by_distance": binned(gts, preds, "distance", DISTANCE_BINS_M, min_gate_px),
         "by_size": binned(gts, preds, "side", SIZE_BINS_PX, 0.0),
         "matching_rule": (

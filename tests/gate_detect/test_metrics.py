@@ -113,6 +113,7 @@ def test_eval_detector_on_shifted_truth(tiny_dataset, truth_detector, tmp_path):
                 "corner_error_px", "pck", "ms_per_frame", "by_distance"):  # fmt: skip
         assert key in r
     assert r["images"] == 4 and r["gates"] > 0
+    assert "int8:" in r["cpu"]  # the machine its ms_per_frame were measured on
     assert r["precision"] == 1.0 and r["recall"] == 1.0
     assert r["corner_error_px"]["median"] == pytest.approx(1.0)
     assert r["pck"] == {"2px": 1.0, "5px": 1.0}
