@@ -216,7 +216,7 @@ def test_eval_detector_reports_the_backend_it_ran(quantized, tiny_dataset, tmp_p
                               f"cnn:{out}", "--json", str(tmp_path / "r.json"), "--resamples", "0"])  # fmt: skip
     assert res.exit_code == 0, res.output
     assert json.loads((tmp_path / "r.json").read_text())["backend"] == "int8"
-    assert "(one core, int8)" in res.output
+    assert "(one core, int8; " in res.output
 
 
 def test_stale_or_corrupt_int8_networks_name_the_file(quantized, tiny_dataset, tmp_path):
