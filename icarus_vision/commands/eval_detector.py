@@ -57,6 +57,9 @@ def eval_detector_cmd(
     split: str = typer.Option(
         "test", help="Which split: test, or val to compare detectors without reading test."
     ),
+    backend: str = typer.Option(
+        None, help="cnn only: what runs its networks: auto (default), int8, onnxruntime or torch."
+    ),
 ) -> None:
     """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size,
     with 95 % confidence intervals (bootstrap over the images), on a dataset's test split (or
@@ -75,7 +78,8 @@ def eval_detector_cmd(
         progress = progress_reporter(stack, cols, transient=True)
         r = eval_detector(data, detector, json_path, error_model, min_gate_px, split, limit=limit,
                           progress=progress, examples_path=examples,
-                          examples=num_examples, seed=seed, resamples=resamples)  # fmt: skip
+                          examples=num_examples, seed=seed, resamples=resamples,
+                          backend=backend)  # fmt: skip
     title = (f"{r['detector']} on {r['images']} {r['split']} images, {r['gates']} gates >= "
              f"{r['min_gate_px']:g} px")  # fmt: skip
     console.print(

@@ -28,7 +28,7 @@ from icarus_vision.gate_detect.metrics import (
     evaluate_image,
     summarize,
 )
-from icarus_vision.gate_detect.registry import make_detector
+from icarus_vision.gate_detect.registry import make_detector, parse_spec
 
 GATE_SIZE_M = 1.0
 """Opening side assumed to estimate the distance of a false positive from its apparent size."""
@@ -62,6 +62,7 @@ def eval_detector(
     examples: int = 12,
     seed: int = 0,
     resamples: int = 1000,
+    backend: str | None = None,
 ) -> dict:
     """Evaluate a detector on a gen-dataset split.
 
@@ -80,6 +81,8 @@ def eval_detector(
         examples: how many images that picture shows.
         seed: seed of the bootstrap (``confidence``).
         resamples: bootstrap resamples of the test images (0: no ``confidence``).
+        backend: what runs a CNN's networks (``CnnDetector``'s ``backend``: auto, int8,
+            onnxruntime or torch); None: its default, auto. Only for a ``cnn`` spec.
 
     Returns:
         the report: detector, backend (a CNN's: what ran its networks), images, gates, min_gate_px, precision, recall, corner_error_px
@@ -99,7 +102,7 @@ def eval_detector(
     ext = (Path(examples_path).suffix.lower() or ".jpg") if examples_path is not None else None
     if ext is not None and not cv2.haveImageWriter(f"examples{ext}"):
         raise ValueError(f"{examples_path}: cannot write an image of this type (use .jpg or .png)")
-    detector = make_detector(detector_spec)
+    detector = _detector(detector_spec, backend)
     data = load_split(data_dir, split, None, limit)
     gts, preds, samples, times, tiles, per_image = [], [], [], [], [], []
     n = len(data.files)
@@ -169,6 +172,18 @@ def eval_detector(
     if json_path is not None:
         atomic_write_json(json_path, report)
     return report
+
+
+def _detector(spec: str, backend: str | None):
+    """The detector of ``spec``, a CNN's networks run by ``backend`` if given."""
+    if backend is None:
+        return make_detector(spec)
+    name, path = parse_spec(spec)
+    if name != "cnn":
+        raise ValueError(f"a backend applies to the cnn detector only, not {name!r}")
+    from icarus_vision.gate_detect.cnn import CnnDetector
+
+    return CnnDetector.load(path, backend=backend)
 
 
 def _sample(rec: dict, gate, k: np.ndarray) -> dict:

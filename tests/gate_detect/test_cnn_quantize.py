@@ -219,6 +219,20 @@ def test_eval_detector_reports_the_backend_it_ran(quantized, tiny_dataset, tmp_p
     assert "(one core, int8; " in res.output
 
 
+def test_eval_detector_runs_the_backend_asked_for(quantized, tiny_dataset, tmp_path):
+    _, out = quantized
+    args = ["eval-detector", "--data", str(tiny_dataset), "--resamples", "0", "--limit", "2"]
+    for backend in ("onnxruntime", "int8"):
+        res = runner.invoke(app, [*args, "--detector", f"cnn:{out}", "--backend", backend,
+                                  "--json", str(tmp_path / f"{backend}.json")])  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert json.loads((tmp_path / f"{backend}.json").read_text())["backend"] == backend
+    res = runner.invoke(app, [*args, "--detector", "opencv", "--backend", "int8"])
+    assert res.exit_code != 0 and "cnn detector only" in res.output
+    res = runner.invoke(app, [*args, "--detector", f"cnn:{out}", "--backend", "gpu"])
+    assert res.exit_code != 0 and "backend must be one of" in res.output
+
+
 def test_stale_or_corrupt_int8_networks_name_the_file(quantized, tiny_dataset, tmp_path):
     _, out = quantized
     folder = tmp_path / "ck"
