@@ -69,10 +69,9 @@ def loose_detector(
     zoom = load_zoom(path, meta)
     late = zoom is not None and own_cfg.max_skew > 0
     refiner.cfg = replace(own_cfg, threshold=floor, max_skew=0.0 if late else own_cfg.max_skew)
-    int8 = load_int8(path, meta)
     det = CnnDetector(
-        model, replace(decode_cfg, max_outside_px=None), refiner=refiner, zoom=zoom, int8=int8,
-        int8_weight_bits=int8_weight_bits(meta) if int8 else None, backend=backend,
+        model, replace(decode_cfg, max_outside_px=None), refiner=refiner, zoom=zoom,
+        int8=load_int8(path, meta), int8_weight_bits=int8_weight_bits(meta), backend=backend,
     )  # fmt: skip
     return det, own, own_cfg if late else None
 

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
+from icarus_vision.gate_detect.cnn import CnnDetector, cpu_description
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.draw import draw_detections, sheet
 from icarus_vision.gate_detect.error_model import build_error_model, gate_error, viewing_angle_deg
@@ -129,8 +130,6 @@ def eval_detector(
                 tiles.append(draw_detections(image, found, [t[0] for t in truth]))
             if progress is not None:
                 progress(i + 1, n)
-    from icarus_vision.gate_detect.cnn import cpu_description
-
     report = {
         "detector": detector_spec,
         "backend": getattr(detector, "backend", None),
@@ -181,8 +180,6 @@ def _detector(spec: str, backend: str | None):
     name, path = parse_spec(spec)
     if name != "cnn":
         raise ValueError(f"a backend applies to the cnn detector only, not {name!r}")
-    from icarus_vision.gate_detect.cnn import CnnDetector
-
     return CnnDetector.load(path, backend=backend)
 
 

@@ -284,10 +284,8 @@ class CnnDetector(Detector):
         path = SHIPPED if path is None else path
         model, decode_cfg, meta = load_checkpoint(path)
         refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
-        int8 = load_int8(path, meta)
-        bits = int8_weight_bits(meta) if int8 else None
-        return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=int8,
-                   int8_weight_bits=bits, **settings)  # fmt: skip
+        return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=load_int8(path, meta),
+                   int8_weight_bits=int8_weight_bits(meta), **settings)  # fmt: skip
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""

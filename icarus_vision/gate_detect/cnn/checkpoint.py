@@ -186,10 +186,11 @@ def save_int8(folder: str | Path, models: dict[str, bytes], record: dict) -> Non
     atomic_write_json(folder / CONFIG, meta)
 
 
-def int8_weight_bits(meta: dict) -> int:
-    """Bits of the weights of a checkpoint's int8 copies (its JSON ``meta`` has an ``int8``
-    section; copies made before it recorded them have 8). :func:`load_int8` checks the value."""
-    return meta["int8"].get("weight_bits", 8)
+def int8_weight_bits(meta: dict) -> int | None:
+    """Bits of the weights of a checkpoint's int8 copies, from its JSON ``meta`` (copies made
+    before it recorded them have 8); None if it has no ``int8`` section. :func:`load_int8`
+    checks the value."""
+    return meta["int8"].get("weight_bits", 8) if "int8" in meta else None
 
 
 def load_int8(path: str | Path, meta: dict) -> dict[str, bytes] | None:
