@@ -15,13 +15,10 @@ from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoin
 from icarus_vision.gate_detect.cnn.data import GateDataset, load_split, load_splits, mirror
 from icarus_vision.gate_detect.cnn.decode import (
     DecodeConfig,
-    apart,
-    boxes,
     decode,
     in_frame,
     nested_gates,
     peak_maps,
-    quad_iou,
     snap,
 )
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
@@ -127,13 +124,6 @@ def test_decode_tuning_prefers_fewer_detections_among_equal_scores():
     worse = (high, metrics(0.95, 0.85, 80))  # 0.85: fewest detections, but worse
     assert choose([best, tie, worse])[0] is mid
     assert choose([best, worse])[0] is low
-
-
-def test_quad_iou():
-    sq = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
-    assert quad_iou(sq, sq) == pytest.approx(1.0)
-    assert quad_iou(sq, sq + (1.0, 0.0)) == pytest.approx(2.0 / 6.0)
-    assert quad_iou(sq, sq + (5.0, 0.0)) == 0.0
 
 
 def test_stem_puts_the_output_at_input_stride_4():
@@ -466,13 +456,6 @@ def test_nested_gates_of_several_centres_are_those_of_each_alone():
             np.testing.assert_array_equal(s, s1)
     assert min(np.abs(c - far).max() for c, _ in together[0]) < 1e-9
     assert min(np.abs(c - near_b).max() for c, _ in together[1]) < 1e-9
-
-
-def test_boxes_apart_means_no_overlap():
-    quads = np.stack([GATE_A, GATE_B, GATE_A + (1.0, 1.0)])
-    b = boxes(quads)
-    assert apart(b[0], b[1]) and quad_iou(GATE_A, GATE_B) == 0.0
-    assert not apart(b[0], b[2]) and quad_iou(GATE_A, GATE_A + 1.0) > 0.0
 
 
 def test_an_unknown_split_is_named_with_the_ones_there_are(tiny_dataset):

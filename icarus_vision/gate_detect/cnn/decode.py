@@ -12,16 +12,17 @@ Grid units throughout (cells of the output map); ``decode`` converts to camera p
 
 from __future__ import annotations
 
-import functools
 import itertools
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import torch
+from numba import njit
 
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
-from icarus_vision.gate_detect.metrics import mean_sides
+from icarus_vision.gate_detect.cnn.polygon import quad_iou, quad_iou_kernel
+
+__all__ = ["DecodeConfig", "decode", "in_frame", "nested_gates", "peak_maps", "quad_iou", "snap"]
 
 
 @dataclass(frozen=True)
@@ -72,20 +73,36 @@ direction from the centre (wider than ``NESTED_MAX_TURN``: the centres of nested
 MAX_PEAKS_PER_TYPE = 4
 """Corner peaks of each type (those nearest the regressed direction) tried for nested gates."""
 
-_KERNEL = np.ones((3, 3), np.uint8)
+MAX_CHOICES = (MAX_PEAKS_PER_TYPE + 1) ** 4
+"""Most nested-gate hypotheses one centre peak can yield (a peak or none per corner type)."""
 
 
 def peak_maps(heat: np.ndarray, thresholds: np.ndarray) -> tuple[np.ndarray, ...]:
     """Local maxima (3x3) of (K, H, W) probability maps at or above (K,) ``thresholds``: indices
-    (k, y, x), sorted by map, then row, then column.
+    (k, y, x), sorted by map, then row, then column. A value counts as a maximum if no
+    neighbour in its own map is larger (the image border counts as -inf)."""
+    return _peaks(np.ascontiguousarray(heat, np.float32), np.asarray(thresholds, np.float32))
 
-    The maps are dilated in one call, stacked with a row of -inf between them (so no maximum
-    sees across from the next map; the image border also counts as -inf)."""
+
+@njit(cache=True)
+def _peaks(heat: np.ndarray, thresholds: np.ndarray) -> tuple[np.ndarray, ...]:
     k, h, w = heat.shape
-    stacked = np.full((k, h + 1, w), -np.inf, np.float32)
-    stacked[:, :h] = heat
-    dilated = cv2.dilate(stacked.reshape(k * (h + 1), w), _KERNEL).reshape(k, h + 1, w)
-    return np.nonzero((stacked == dilated) & (stacked >= thresholds[:, None, None]))
+    found = np.empty((3, k * h * w), np.int64)
+    n = 0
+    for c in range(k):
+        for y in range(h):
+            for x in range(w):
+                v = heat[c, y, x]
+                if not v >= thresholds[c]:
+                    continue
+                peak = True
+                for yy in range(max(y - 1, 0), min(y + 2, h)):
+                    for xx in range(max(x - 1, 0), min(x + 2, w)):
+                        peak &= not heat[c, yy, xx] > v
+                if peak:
+                    found[0, n], found[1, n], found[2, n] = c, y, x
+                    n += 1
+    return found[0, :n].copy(), found[1, :n].copy(), found[2, :n].copy()
 
 
 def nested_gates(
@@ -100,7 +117,8 @@ def nested_gates(
     peaks, is fitted to the regressed shape by a similarity transform (scale, rotation, shift;
     least squares). A choice is a gate when the fit is close (``max_residual``), barely rotated,
     at another scale within ``NESTED_SCALE`` and centred near the peak; a missing corner comes
-    from the fit. All centres are searched together (a few numpy calls per frame, not per centre).
+    from the fit. The peaks tried per type are the ``MAX_PEAKS_PER_TYPE`` nearest the regressed
+    corner's direction from the centre (within ``NESTED_SECTOR_TAN``).
 
     Args:
         centres: (P, 2) centre cells.
@@ -115,72 +133,106 @@ def nested_gates(
         the order of the choices (the first corner type's peak varying slowest).
     """
     z, kind, val = peaks
-    found: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(len(centres))]
-    if not len(centres) or len(z) < NESTED_MIN_CORNERS:
-        return found
-    tmpl = vectors[..., 0] + 1j * vectors[..., 1]  # (P, 4) the regressed shapes about the centre
-    side = mean_sides(vectors)
-    c0 = centres[:, 0] + 1j * centres[:, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = (z - c0[:, None]) / tmpl[:, kind]  # (P, N) real: scale along the corner's direction
-        tan = np.abs(w.imag) / w.real
-    near = (w.real > NESTED_SCALE[0]) & (w.real < NESTED_SCALE[1]) & (tan < NESTED_SECTOR_TAN)
-    # per centre, its peaks by type (peaks not near it last), then nearest the direction first
-    k = np.where(near, kind, 4)
-    order = np.lexsort((tan, k), axis=-1)
-    rows = np.arange(len(centres))[:, None]
-    k = k[rows, order]
-    per_type = (k[:, :, None] == np.arange(5)).sum(axis=1)  # (P, 5)
-    start = np.cumsum(per_type, axis=1) - per_type
-    rank = np.arange(len(z)) - start[rows, k]  # position within its type
-    r, i = np.nonzero((k < 4) & (rank < MAX_PEAKS_PER_TYPE))
-    j, rank = order[r, i], rank[r, i] + 1
-    counts = np.minimum(per_type[:, :4], MAX_PEAKS_PER_TYPE)  # (P, 4) peaks tried per type
-    pts = np.full((len(centres), 4, MAX_PEAKS_PER_TYPE + 1), np.nan + 0j)  # column 0: "no peak"
-    vals = np.zeros((len(centres), 4, MAX_PEAKS_PER_TYPE + 1))
-    pts[r, kind[j], rank], vals[r, kind[j], rank] = z[j], val[j]
-    choices, peaks_in = _choices(tuple((counts.max(axis=0) + 1).tolist()))
-    usable = (side >= 1e-3) & (np.count_nonzero(counts, axis=1) >= NESTED_MIN_CORNERS)
-    keep = (
-        usable[:, None]
-        & (choices[None] <= counts[:, None]).all(axis=2)
-        & (peaks_in >= NESTED_MIN_CORNERS)
-    )
-    p, c = np.nonzero(keep)  # (centre, choice) pairs, by centre then choice
-    choice = choices[c]  # (K, 4)
-    q, have = pts[p[:, None], np.arange(4), choice], choice > 0  # (K, 4) complex peaks
-    tmpl, c0, side = tmpl[p], c0[p], side[p]
-    n = have.sum(axis=1)
-    p_mean = (tmpl * have).sum(axis=1) / n
-    q_mean = np.where(have, q, 0).sum(axis=1) / n
-    dp = np.where(have, tmpl - p_mean[:, None], 0)
-    dq = np.where(have, q - q_mean[:, None], 0)
-    a = (np.conj(dp) * dq).sum(axis=1) / (np.abs(dp) ** 2).sum(axis=1)  # scale * e^(i turn)
-    fit = a[:, None] * (tmpl - p_mean[:, None]) + q_mean[:, None]  # (K, 4)
-    scale = np.maximum(np.abs(a), 1e-9)
-    resid = np.sqrt((np.where(have, np.abs(fit - q), 0) ** 2).sum(axis=1) / n) / (scale * side)
-    offset = np.abs(fit.mean(axis=1) - c0) / (scale * side)
-    ok = (
-        (resid < max_residual)
-        & (np.abs(np.angle(a)) < NESTED_MAX_TURN)
-        & (scale > NESTED_SCALE[0])
-        & (scale < NESTED_SCALE[1])
-        & (offset < NESTED_MAX_OFFSET)
-    )
-    corners = np.where(have[ok], q[ok], fit[ok])  # (G, 4) complex corners, fitted where missing
-    corners = np.stack([corners.real, corners.imag], axis=2)
-    scores = vals[p[ok][:, None], np.arange(4), choice[ok]]
-    for i, g, s in zip(p[ok].tolist(), corners, scores, strict=True):
-        found[i].append((g, s))
+    z = np.asarray(z, np.complex128)
+    kind, val = np.asarray(kind, np.int64), np.asarray(val, np.float64)
+    found = []
+    for c, v in zip(np.asarray(centres, float), np.asarray(vectors, float), strict=True):
+        corners, scores = _nested(c, v, z, kind, val, max_residual)
+        found.append(list(zip(corners, scores, strict=True)))
     return found
 
 
-@functools.cache
-def _choices(shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """(M, 4) every choice of a peak (1, 2, ...) or none (0) per corner type, below ``shape``
-    per type, in C order (the first type varying slowest); (M,) the peaks each chooses."""
-    choices = np.indices(shape).reshape(len(shape), -1).T
-    return choices, (choices > 0).sum(axis=1)
+@njit(cache=True, error_model="numpy")
+def _nested(
+    centre: np.ndarray,
+    vectors: np.ndarray,
+    z: np.ndarray,
+    kind: np.ndarray,
+    val: np.ndarray,
+    max_residual: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nested_gates` of one centre (2,) and its vectors (4, 2): (G, 4, 2) corners and
+    (G, 4) scores."""
+    c0 = centre[0] + 1j * centre[1]
+    tmpl = vectors[:, 0] + 1j * vectors[:, 1]
+    side = _mean_side(vectors)
+    # per corner type, the peaks near its direction, nearest the direction first
+    pts = np.full((4, MAX_PEAKS_PER_TYPE + 1), np.nan + 0j)  # column 0: "no peak"
+    vals = np.zeros((4, MAX_PEAKS_PER_TYPE + 1))
+    counts = np.zeros(4, np.int64)
+    tan = np.empty(len(z))
+    for t in range(4):
+        idx = np.empty(len(z), np.int64)
+        m = 0
+        for n in range(len(z)):
+            if kind[n] != t:
+                continue
+            w = (z[n] - c0) / tmpl[t]  # real: the scale along the corner's direction
+            tan_n = abs(w.imag) / w.real
+            if w.real > NESTED_SCALE[0] and w.real < NESTED_SCALE[1] and tan_n < NESTED_SECTOR_TAN:
+                idx[m], tan[m] = n, tan_n
+                m += 1
+        order = np.argsort(tan[:m], kind="mergesort")[:MAX_PEAKS_PER_TYPE]
+        counts[t] = len(order)
+        for r in range(len(order)):
+            pts[t, r + 1], vals[t, r + 1] = z[idx[order[r]]], val[idx[order[r]]]
+    corners = np.empty((MAX_CHOICES, 4, 2))
+    scores = np.zeros((MAX_CHOICES, 4))
+    g = 0
+    if not side >= 1e-3 or np.count_nonzero(counts) < NESTED_MIN_CORNERS:
+        return corners[:0], scores[:0]
+    choice = np.zeros(4, np.int64)
+    q = np.empty(4, np.complex128)
+    fit = np.empty(4, np.complex128)
+    for number in range(np.prod(counts + 1)):
+        rest = number  # the choice in C order: the first type's peak varies slowest
+        for t in range(3, -1, -1):
+            choice[t] = rest % (counts[t] + 1)
+            rest //= counts[t] + 1
+        have = choice > 0
+        n = np.count_nonzero(have)
+        if n < NESTED_MIN_CORNERS:
+            continue
+        p_mean, q_mean = 0j, 0j
+        for t in range(4):
+            q[t] = pts[t, choice[t]]
+            if have[t]:
+                p_mean += tmpl[t]
+                q_mean += q[t]
+        p_mean, q_mean = p_mean / n, q_mean / n
+        num, den = 0j, 0.0
+        for t in range(4):
+            if have[t]:
+                num += np.conj(tmpl[t] - p_mean) * (q[t] - q_mean)
+                den += abs(tmpl[t] - p_mean) ** 2
+        a = num / den  # scale * e^(i turn)
+        misfit, centre_fit = 0.0, 0j
+        for t in range(4):
+            fit[t] = a * (tmpl[t] - p_mean) + q_mean
+            centre_fit += fit[t] / 4
+            if have[t]:
+                misfit += abs(fit[t] - q[t]) ** 2
+        scale = max(abs(a), 1e-9)
+        resid = np.sqrt(misfit / n) / (scale * side)
+        offset = abs(centre_fit - c0) / (scale * side)
+        if (resid < max_residual and abs(np.arctan2(a.imag, a.real)) < NESTED_MAX_TURN
+                and NESTED_SCALE[0] < scale < NESTED_SCALE[1] and offset < NESTED_MAX_OFFSET):  # fmt: skip
+            for t in range(4):
+                corner = q[t] if have[t] else fit[t]
+                corners[g, t, 0], corners[g, t, 1] = corner.real, corner.imag
+                scores[g, t] = vals[t, choice[t]]
+            g += 1
+    return corners[:g].copy(), scores[:g].copy()
+
+
+@njit(cache=True)
+def _mean_side(q: np.ndarray) -> float:
+    """Mean side length of a (4, 2) quadrilateral."""
+    s = 0.0
+    for i in range(4):
+        j = (i + 1) % 4
+        s += np.sqrt((q[i, 0] - q[j, 0]) ** 2 + (q[i, 1] - q[j, 1]) ** 2)
+    return s / 4
 
 
 def snap(
@@ -196,15 +248,35 @@ def snap(
         (corners (N, 4, 2), scores (N, 4): the peak's score, 0 where nothing was near).
     """
     pos, kind, val = peaks
-    if not len(pos) or not len(regressed):
-        return regressed.copy(), np.zeros(regressed.shape[:2])
-    radius = np.maximum(1.5, snap_radius * mean_sides(regressed))
-    d = np.sqrt(((pos - regressed[:, :, None]) ** 2).sum(axis=3))  # (N, 4, M)
-    d[:, kind[None] != np.arange(4)[:, None]] = np.inf  # peaks of another type
-    j = d.argmin(axis=2)
-    near = np.take_along_axis(d, j[..., None], axis=2)[..., 0] <= radius[:, None]
-    corners = np.where(near[..., None], pos[j], regressed)
-    return corners, np.where(near, val[j], 0.0)
+    return _snap(
+        np.ascontiguousarray(regressed, np.float64).reshape(-1, 4, 2),
+        np.ascontiguousarray(pos, np.float64).reshape(-1, 2),
+        np.asarray(kind, np.int64),
+        np.asarray(val, np.float64),
+        snap_radius,
+    )
+
+
+@njit(cache=True)
+def _snap(
+    regressed: np.ndarray, pos: np.ndarray, kind: np.ndarray, val: np.ndarray, snap_radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    corners = regressed.copy()
+    scores = np.zeros(regressed.shape[:2])
+    for i in range(len(regressed)):
+        radius = max(1.5, snap_radius * _mean_side(regressed[i]))
+        for c in range(4):
+            best, j = np.inf, -1
+            for m in range(len(pos)):
+                if kind[m] == c:
+                    d = np.sqrt((pos[m, 0] - regressed[i, c, 0]) ** 2
+                                + (pos[m, 1] - regressed[i, c, 1]) ** 2)  # fmt: skip
+                    if d < best:
+                        best, j = d, m
+            if j >= 0 and best <= radius:
+                corners[i, c] = pos[j]
+                scores[i, c] = val[j]
+    return corners, scores
 
 
 def decode(
@@ -231,92 +303,113 @@ def decode(
     if isinstance(out, torch.Tensor):
         out = out.detach().numpy()
     maps = np.ascontiguousarray(out, dtype=np.float32)
-    heat, reg = 1.0 / (1.0 + np.exp(-maps[:5])), maps[5:]
+    heat = 1.0 / (1.0 + np.exp(-maps[:5]))
     thresholds = np.array([cfg.centre_threshold] + [cfg.corner_threshold] * 4, np.float32)
-    ks, ys, xs = peak_maps(heat, thresholds)
-    ends = np.searchsorted(ks, np.arange(6)).tolist()  # peaks of map k: ends[k]:ends[k + 1]
-    # centre peaks, best first, with the corners they regress
-    cys, cxs = ys[: ends[1]], xs[: ends[1]]
-    order = np.argsort(-heat[0, cys, cxs])[: cfg.max_gates]
-    cys, cxs = cys[order], cxs[order]
-    centres = np.stack([cxs, cys], axis=1).astype(float)
-    vectors = VECTOR_SCALE * reg[2:, cys, cxs].T.reshape(-1, 4, 2)
-    # corner peaks, each at its regressed sub-cell position
-    ks, ys, xs = ks[ends[1] :], ys[ends[1] :], xs[ends[1] :]
-    peaks = (np.stack([xs + reg[0, ys, xs], ys + reg[1, ys, xs]], axis=1), ks - 1, heat[ks, ys, xs])
-    found = _hypotheses(centres, vectors, heat[0, cys, cxs].tolist(), peaks, cfg)
-    gates = _best(found, scale, cfg)
+    corners, corner_scores, scores, pos, kind, val = _decode(
+        heat, maps[5:], thresholds, int(cfg.max_gates), float(cfg.snap_radius), bool(cfg.nested),
+        float(cfg.nested_residual), float(cfg.nms_iou), int(cfg.min_snapped),
+        float(cfg.sure_centre), float(scale[0]), float(scale[1]),
+    )  # fmt: skip
+    gates = list(zip(corners, corner_scores, scores.tolist(), strict=True))
     if not with_peaks:
         size = (scale[0] * out.shape[-1], scale[1] * out.shape[-2])
         return in_frame(gates, size, cfg.max_outside_px)
-    pos, _, val = peaks
-    per_type = itertools.pairwise([e - ends[1] for e in ends[1:]])
-    return gates, [(pos[a:b] * np.asarray(scale) - 0.5, val[a:b]) for a, b in per_type]
+    ends = np.searchsorted(kind, np.arange(5)).tolist()
+    return gates, [(pos[a:b] * np.asarray(scale) - 0.5, val[a:b])
+                   for a, b in itertools.pairwise(ends)]  # fmt: skip
 
 
-def _hypotheses(
-    centres: np.ndarray,
-    vectors: np.ndarray,
-    scores: list[float],
-    peaks: tuple[np.ndarray, np.ndarray, np.ndarray],
-    cfg: DecodeConfig,
-) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """Each centre peak's regressed gate (corners snapped), then, unless a better one overlaps it
-    (the same gate), the gates nested in or around it: ``(corners (4, 2) cells, corner scores
-    (4,), score)`` in that order.
+@njit(cache=True, error_model="numpy")
+def _decode(heat, reg, thresholds, max_gates, snap_radius, nested, nested_residual, nms_iou,
+            min_snapped, sure_centre, sx, sy):  # fmt: skip
+    """:func:`decode` on the network's (5, H, W) heatmaps and (10, H, W) regressions: the
+    gates' corners (G, 4, 2) pixels, corner scores (G, 4) and scores (G,), and every corner
+    peak's position (M, 2) cells, type (M,) and score (M,), by type.
 
-    Args:
-        centres: (P, 2) centre peaks, cells, best first.
-        vectors: (P, 4, 2) their regressed centre-to-corner vectors, cells.
-        scores: (P,) their heatmap values.
-        peaks: corner peaks: positions (M, 2) cells, types (M,) 0-3, scores (M,).
-    """
-    snapped, snapped_scores = snap(centres[:, None] + vectors, peaks, cfg.snap_radius)
-    # a weaker peak of a gate already searched around is not searched again
-    primary: list[bool] = []
-    box = boxes(snapped)
-    for i, g in enumerate(snapped):
-        primary.append(not any(quad_iou(g, snapped[j]) > cfg.nms_iou for j in range(i)
-                               if primary[j] and not apart(box[i], box[j])))  # fmt: skip
-    nested = iter(())
-    if cfg.nested:
-        pos, kind, val = peaks
-        keep = np.array(primary, bool)
-        z = pos[:, 0] + 1j * pos[:, 1]
-        nested = iter(
-            nested_gates(centres[keep], vectors[keep], (z, kind, val), cfg.nested_residual)
+    Each centre peak's regressed gate, corners snapped, is a hypothesis; unless a better one
+    overlaps it (the same gate), so are the gates nested in or around it. The hypotheses, best
+    first, are then reported unless unconfirmed by their corners (``min_snapped``, ``sure_centre``)
+    or overlapping a better reported one."""
+    ks, ys, xs = _peaks(heat, thresholds)
+    n_centres = np.searchsorted(ks, 1)
+    centre_scores = np.empty(n_centres)
+    for i in range(n_centres):
+        centre_scores[i] = heat[0, ys[i], xs[i]]
+    order = np.argsort(-centre_scores, kind="mergesort")[:max_gates]
+    p = len(order)
+    centres, vectors = np.empty((p, 2)), np.empty((p, 4, 2))
+    for i in range(p):
+        y, x = ys[order[i]], xs[order[i]]
+        centres[i, 0], centres[i, 1] = x, y
+        for c in range(4):
+            for d in range(2):
+                vectors[i, c, d] = np.float32(VECTOR_SCALE) * reg[2 + 2 * c + d, y, x]
+    m = len(ks) - n_centres  # corner peaks, each at its regressed sub-cell position
+    pos, kind, val = np.empty((m, 2)), ks[n_centres:] - 1, np.empty(m)
+    for i in range(m):
+        y, x = ys[n_centres + i], xs[n_centres + i]
+        pos[i, 0], pos[i, 1] = x + reg[0, y, x], y + reg[1, y, x]
+        val[i] = heat[ks[n_centres + i], y, x]
+    z = pos[:, 0] + 1j * pos[:, 1]
+    regressed = vectors.copy()
+    for i in range(p):
+        regressed[i] += centres[i]
+    snapped, snapped_scores = _snap(regressed, pos, kind, val, snap_radius)
+    # hypotheses: corners (cells), corner scores, score
+    cap = p * (1 + MAX_CHOICES) if nested else p
+    hyp, hyp_corner_scores, hyp_scores = np.empty((cap, 4, 2)), np.empty((cap, 4)), np.empty(cap)
+    n = 0
+    primary = np.zeros(p, np.bool_)
+    for i in range(p):
+        hyp[n], hyp_corner_scores[n], hyp_scores[n] = (
+            snapped[i],
+            snapped_scores[i],
+            centre_scores[order[i]],
         )
-    found = []
-    for g, s, score, is_primary in zip(snapped, snapped_scores, scores, primary, strict=True):
-        found.append((g, s, score))
-        if is_primary and cfg.nested:
-            found += [(g, s, score * float(s.mean())) for g, s in next(nested)]
-    return found
-
-
-def _best(
-    found: list[tuple[np.ndarray, np.ndarray, float]],
-    scale: tuple[float, float],
-    cfg: DecodeConfig,
-) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """The gates among hypotheses (:func:`_hypotheses`), in camera pixels: best score first,
-    confirmed by their corners (``min_snapped``) or sure (``sure_centre``), none overlapping a
-    better one by more than ``nms_iou``, at most ``max_gates``."""
-    found = sorted(found, key=lambda f: -f[2])
-    pixels = np.array([g for g, _, _ in found]).reshape(-1, 4, 2) * np.asarray(scale) - 0.5
-    box = boxes(pixels)
-    gates, kept = [], []
-    for i, (corners, (_, s, score)) in enumerate(zip(pixels, found, strict=True)):
-        if np.count_nonzero(s) < cfg.min_snapped and score < cfg.sure_centre:
-            continue
-        if any(quad_iou(corners, pixels[j]) > cfg.nms_iou
-               for j in kept if not apart(box[i], box[j])):  # fmt: skip
-            continue
-        gates.append((corners, s, score))
-        kept.append(i)
-        if len(gates) == cfg.max_gates:
+        n += 1
+        # a weaker peak of a gate already searched around is not searched again
+        primary[i] = not _overlaps(snapped[i], snapped, primary[:i], nms_iou)
+        if primary[i] and nested:
+            corners, scores = _nested(centres[i], vectors[i], z, kind, val, nested_residual)
+            for g in range(len(corners)):
+                hyp[n], hyp_corner_scores[n] = corners[g], scores[g]
+                hyp_scores[n] = centre_scores[order[i]] * scores[g].mean()
+                n += 1
+    # the best hypotheses, in pixels, none overlapping a better one
+    pixels = np.empty((n, 4, 2))
+    for i in range(n):
+        pixels[i, :, 0], pixels[i, :, 1] = hyp[i, :, 0] * sx - 0.5, hyp[i, :, 1] * sy - 0.5
+    kept = np.zeros(n, np.bool_)
+    chosen = np.empty(min(n, max_gates), np.int64)
+    count = 0
+    for i in np.argsort(-hyp_scores[:n], kind="mergesort"):
+        if count == max_gates:
             break
-    return gates
+        if np.count_nonzero(hyp_corner_scores[i]) < min_snapped and hyp_scores[i] < sure_centre:
+            continue
+        if not _overlaps(pixels[i], pixels, kept, nms_iou):
+            kept[i] = True
+            chosen[count] = i
+            count += 1
+    chosen = chosen[:count]
+    return pixels[chosen], hyp_corner_scores[chosen], hyp_scores[chosen], pos, kind, val
+
+
+@njit(cache=True)
+def _overlaps(quad: np.ndarray, others: np.ndarray, among: np.ndarray, nms_iou: float) -> bool:
+    """Whether a (4, 2) quadrilateral overlaps any of ``others[among]`` by more than ``nms_iou``
+    (intersection over union; bounding boxes first, which rules out most)."""
+    x0, y0 = quad[:, 0].min(), quad[:, 1].min()
+    x1, y1 = quad[:, 0].max(), quad[:, 1].max()
+    for j in range(len(among)):
+        if not among[j]:
+            continue
+        o = others[j]
+        if x1 < o[:, 0].min() or o[:, 0].max() < x0 or y1 < o[:, 1].min() or o[:, 1].max() < y0:
+            continue
+        if quad_iou_kernel(quad, o) > nms_iou:
+            return True
+    return False
 
 
 def in_frame(
@@ -334,25 +427,3 @@ def in_frame(
     lo, hi = -0.5 - max_outside_px, np.array([w, h]) - 0.5 + max_outside_px
     ok = ((q >= lo) & (q <= hi)).all(axis=(1, 2))
     return [f for f, keep in zip(found, ok, strict=True) if keep]
-
-
-def quad_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two (4, 2) quadrilaterals (their convex hulls), in [0, 1]."""
-    ha = cv2.convexHull(np.asarray(a, np.float32))
-    hb = cv2.convexHull(np.asarray(b, np.float32))
-    inter, _ = cv2.intersectConvexConvex(ha, hb)
-    union = cv2.contourArea(ha) + cv2.contourArea(hb) - inter
-    return min(float(inter / union), 1.0) if union > 0 else 0.0
-
-
-def boxes(quads: np.ndarray) -> list[tuple[float, float, float, float]]:
-    """Bounding boxes (x0, y0, x1, y1) of (N, 4, 2) quadrilaterals, as Python floats (for
-    :func:`apart`)."""
-    q = np.asarray(quads, float).reshape(-1, 4, 2)
-    return [tuple(b) for b in np.concatenate([q.min(axis=1), q.max(axis=1)], axis=1).tolist()]
-
-
-def apart(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
-    """Whether two :func:`boxes` do not overlap: then so do their quadrilaterals, and
-    :func:`quad_iou` is 0 (checking this first saves most of its calls)."""
-    return a[2] < b[0] or b[2] < a[0] or a[3] < b[1] or b[3] < a[1]
