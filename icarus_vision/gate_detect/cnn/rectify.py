@@ -13,10 +13,11 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 import torch
+from numba import njit
 
 from icarus_vision.gate_detect.base import FLIP_ORDER
+from icarus_vision.gate_detect.cnn.homography import perspective, transform
 from icarus_vision.gate_detect.cnn.model import to_float
-from icarus_vision.gate_detect.metrics import NEXT_CORNER
 
 if TYPE_CHECKING:
     from icarus_vision.gate_detect.cnn.refine import RefineConfig
@@ -43,26 +44,6 @@ def patch_to_image(quads: np.ndarray, cfg: RefineConfig) -> np.ndarray:
     return perspective(square(cfg), quads)
 
 
-def perspective(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) homographies taking (4, 2) ``src`` corners onto ``dst`` corners, either side
-    (N, 4, 2) or one (4, 2) shared by all (OpenCV, in float32)."""
-    src, dst = np.asarray(src, np.float32), np.asarray(dst, np.float32)
-    n = len(src) if src.ndim == 3 else len(dst) if dst.ndim == 3 else 1
-    src = np.ascontiguousarray(np.broadcast_to(src, (n, 4, 2)))
-    dst = np.ascontiguousarray(np.broadcast_to(dst, (n, 4, 2)))
-    out = np.empty((n, 3, 3))
-    for i in range(n):
-        out[i] = cv2.getPerspectiveTransform(src[i], dst[i])
-    return out
-
-
-def transform(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Apply (N, 3, 3) homographies to (N, K, 2) points."""
-    p = np.concatenate([pts, np.ones(pts.shape[:-1] + (1,))], axis=-1) @ np.swapaxes(h, 1, 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return p[..., :2] / p[..., 2:]
-
-
 def extract(image: np.ndarray, h: np.ndarray, cfg: RefineConfig) -> np.ndarray:
     """(N, P, P, 3) uint8 patches of ``image`` (H, W, 3) under (N, 3, 3) homographies (black
     outside the image)."""
@@ -77,14 +58,24 @@ def extract(image: np.ndarray, h: np.ndarray, cfg: RefineConfig) -> np.ndarray:
 
 def usable(quads: np.ndarray, min_side_px: float = 4.0) -> np.ndarray:
     """(N,) bool: candidates whose quadrilateral is finite, convex, correctly ordered (clockwise
-    in the image, y down) and not tiny, so that their homography is well defined."""
-    q = np.asarray(quads, float)
-    e = q[:, NEXT_CORNER] - q  # (N, 4, 2) edges
-    f = e[:, NEXT_CORNER]
-    cross = e[..., 0] * f[..., 1] - e[..., 1] * f[..., 0]
-    with np.errstate(invalid="ignore"):
-        big = np.sqrt((e * e).sum(axis=-1)).mean(axis=-1) >= min_side_px  # mean_sides
-        return np.isfinite(q).all(axis=(1, 2)) & (cross > 0).all(axis=1) & big
+    in the image, y down) and not tiny (mean side at least ``min_side_px``), so that their
+    homography is well defined."""
+    return _usable(np.ascontiguousarray(quads, np.float64).reshape(-1, 4, 2), float(min_side_px))
+
+
+@njit(cache=True)
+def _usable(q: np.ndarray, min_side_px: float) -> np.ndarray:
+    ok = np.empty(len(q), np.bool_)
+    for n in range(len(q)):
+        good, sides = np.isfinite(q[n]).all(), 0.0
+        for i in range(4):
+            j, k = (i + 1) % 4, (i + 2) % 4
+            ex, ey = q[n, j, 0] - q[n, i, 0], q[n, j, 1] - q[n, i, 1]
+            fx, fy = q[n, k, 0] - q[n, j, 0], q[n, k, 1] - q[n, j, 1]
+            good &= ex * fy - ey * fx > 0.0
+            sides += np.sqrt(ex * ex + ey * ey)
+        ok[n] = good and sides / 4 >= min_side_px
+    return ok
 
 
 def offsets_to_corners(
@@ -104,14 +95,45 @@ def offsets_to_corners(
             ``h`` is then not used.
     """
     back = np.linalg.inv(h) if back is None else back
-    in_patch = square(cfg)[None] + offsets.reshape(-1, 4, 2) * cfg.side
-    if mirrored is None:
-        return transform(back, in_patch)
-    # mirroring the patch is x -> P - 1 - x (the square is symmetric: lo + hi = P - 1)
-    flip = (square(cfg)[None] + mirrored.reshape(-1, 4, 2) * cfg.side)[:, FLIP_ORDER]
-    flip[..., 0] = cfg.patch - 1 - flip[..., 0]
-    both = transform(back, np.concatenate([in_patch, flip], axis=1))
-    return 0.5 * (both[:, :4] + both[:, 4:])
+    offsets = np.ascontiguousarray(offsets, np.float64).reshape(-1, 4, 2)
+    flip = None if mirrored is None else np.ascontiguousarray(mirrored, np.float64)
+    lo = cfg.margin - 0.5
+    return _offsets_to_corners(
+        np.ascontiguousarray(back, np.float64), offsets,
+        None if flip is None else flip.reshape(-1, 4, 2), lo, float(cfg.side), cfg.patch - 1.0,
+    )  # fmt: skip
+
+
+_FLIP = tuple(FLIP_ORDER)
+
+
+@njit(cache=True, error_model="numpy")
+def _offsets_to_corners(back, offsets, mirrored, lo, side, width):
+    """:func:`offsets_to_corners`: the square's corners (``lo`` and ``lo + side``) plus the
+    offsets times ``side``, to the image; with ``mirrored`` offsets, their corners too (x to
+    ``width - x``, order flipped) and the mean of both in the image."""
+    out = np.empty_like(offsets)
+    for n in range(len(offsets)):
+        m = back[n]
+        for c in range(4):
+            x = lo + side * (c == 1 or c == 2) + offsets[n, c, 0] * side
+            y = lo + side * (c >= 2) + offsets[n, c, 1] * side
+            u, v = _apply(m, x, y)
+            if mirrored is not None:
+                f = _FLIP[c]  # the mirrored reading's corner that is this one
+                x = width - (lo + side * (f == 1 or f == 2) + mirrored[n, f, 0] * side)
+                y = lo + side * (f >= 2) + mirrored[n, f, 1] * side
+                u2, v2 = _apply(m, x, y)
+                u, v = 0.5 * (u + u2), 0.5 * (v + v2)
+            out[n, c, 0], out[n, c, 1] = u, v
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _apply(m: np.ndarray, x: float, y: float) -> tuple[float, float]:
+    """A homography applied to one point."""
+    w = x * m[2, 0] + y * m[2, 1] + m[2, 2]
+    return (x * m[0, 0] + y * m[0, 1] + m[0, 2]) / w, (x * m[1, 0] + y * m[1, 1] + m[1, 2]) / w
 
 
 def corners_to_offsets(h: np.ndarray, corners: np.ndarray, cfg: RefineConfig) -> np.ndarray:
@@ -160,15 +182,27 @@ def squareness(quads: np.ndarray, image_size: tuple[int, int], hfov_deg: float) 
     """
     w, h = image_size
     f = 0.5 * w / math.tan(math.radians(hfov_deg) / 2.0)
-    k_inv = np.array([[1.0 / f, 0.0, -(w - 1) / (2.0 * f)],
-                      [0.0, 1.0 / f, -(h - 1) / (2.0 * f)], [0.0, 0.0, 1.0]])  # fmt: skip
-    r = k_inv @ perspective(_UNIT_SQUARE, quads)[:, :, :2]  # (N, 3, 2): r1, r2
-    gram = np.swapaxes(r, 1, 2) @ r  # (N, 2, 2): |r1|^2, r1 . r2; r1 . r2, |r2|^2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        aspect = np.clip(0.5 * np.log(gram[:, 0, 0] / gram[:, 1, 1]), -3.0, 3.0)
-        cos = np.clip(gram[:, 0, 1] / np.sqrt(gram[:, 0, 0] * gram[:, 1, 1]), -1.0, 1.0)
-    out = np.stack([aspect, cos], axis=1)
-    return np.where(np.isnan(out), 0.0, out)
+    return _squareness(perspective(_UNIT_SQUARE, quads), f, (w - 1) / 2.0, (h - 1) / 2.0)
+
+
+@njit(cache=True, error_model="numpy")
+def _squareness(homographies: np.ndarray, f: float, cx: float, cy: float) -> np.ndarray:
+    out = np.zeros((len(homographies), 2))
+    r = np.empty((3, 2))
+    for n in range(len(homographies)):
+        m = homographies[n]
+        for j in range(2):  # K^-1 H's first two columns: r1, r2 (up to scale)
+            r[0, j] = (m[0, j] - cx * m[2, j]) / f
+            r[1, j] = (m[1, j] - cy * m[2, j]) / f
+            r[2, j] = m[2, j]
+        g00 = r[0, 0] ** 2 + r[1, 0] ** 2 + r[2, 0] ** 2
+        g11 = r[0, 1] ** 2 + r[1, 1] ** 2 + r[2, 1] ** 2
+        g01 = r[0, 0] * r[0, 1] + r[1, 0] * r[1, 1] + r[2, 0] * r[2, 1]
+        aspect = min(max(0.5 * np.log(g00 / g11), -3.0), 3.0)
+        cos = min(max(g01 / np.sqrt(g00 * g11), -1.0), 1.0)
+        out[n, 0] = 0.0 if np.isnan(aspect) else aspect
+        out[n, 1] = 0.0 if np.isnan(cos) else cos
+    return out
 
 
 _UNIT_SQUARE = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
