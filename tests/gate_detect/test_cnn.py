@@ -486,3 +486,18 @@ def test_in_frame_allows_corners_up_to_the_margin_outside_the_image():
     assert in_frame([bottom], (320, 240), 1.5) == [bottom] and not in_frame(
         [bottom], (320, 240), 1.0
     )
+
+
+def test_degenerate_network_outputs_decode_without_error():
+    logits = _as_logits(encode_targets([(GATE_A, VIS), (GATE_B, VIS)], 80, 60)[0])
+    collapsed = logits.clone()
+    collapsed[7:] = 0.0  # every centre-to-corner vector zero: nothing to fit nested gates to
+    assert all(np.isfinite(c).all() for c, _, _ in decode(collapsed, DecodeConfig(), (4.0, 4.0)))
+    broken = logits.clone()
+    broken[:, 30:40] = float("nan")  # NaN and inf where a gate is
+    broken[7:, 45:50] = float("inf")
+    decode(broken, DecodeConfig(), (4.0, 4.0), with_peaks=True)
+    rng = np.random.default_rng(0)
+    noise = torch.from_numpy(rng.normal(0.0, 3.0, (15, 60, 80)).astype(np.float32))
+    gates = decode(noise, DecodeConfig(max_gates=20), (4.0, 4.0))
+    assert len(gates) <= 20

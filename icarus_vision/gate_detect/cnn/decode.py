@@ -165,7 +165,7 @@ def _nested(
         idx = np.empty(len(z), np.int64)
         m = 0
         for n in range(len(z)):
-            if kind[n] != t:
+            if kind[n] != t or tmpl[t] == 0:  # (numba raises on a complex division by 0)
                 continue
             w = (z[n] - c0) / tmpl[t]  # real: the scale along the corner's direction
             tan_n = abs(w.imag) / w.real
@@ -205,6 +205,8 @@ def _nested(
             if have[t]:
                 num += np.conj(tmpl[t] - p_mean) * (q[t] - q_mean)
                 den += abs(tmpl[t] - p_mean) ** 2
+        if not den > 0.0:  # the regressed corners chosen coincide: no shape to fit
+            continue
         a = num / den  # scale * e^(i turn)
         misfit, centre_fit = 0.0, 0j
         for t in range(4):
