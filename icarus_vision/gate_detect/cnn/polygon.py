@@ -58,7 +58,7 @@ def _area(poly: np.ndarray, n: int) -> float:
     return abs(0.5 * s)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _clip(subject: np.ndarray, n: int, clip: np.ndarray, m: int) -> tuple[np.ndarray, int]:
     """The part of a convex polygon inside another, both counter-clockwise (Sutherland-Hodgman):
     (buffer, vertices)."""
