@@ -6,7 +6,7 @@ Usage::
     python benchmarks/detector_operating_point.py [--detector cnn[:PATH]] [--backend auto|int8|onnxruntime]
         [--data datasets/gates-v2-ft12 --data datasets/gates-v2-test5] [--split val]
         [--thresholds 0.15 0.2 0.25 0.3 0.35] [--outside none 0.5 1.5 3]
-        [--max-skew 0.3 0.4] [--skew-min-px 20 30] [--limit N] [--json PATH]
+        [--max-skew 0.3 0.4] [--skew-min-px 20 30] [--reread-min-px 2.0] [--limit N] [--json PATH]
 
 Runs the detector once per frame (one thread) with the refiner's threshold at the lowest of
 ``--thresholds``, no out-of-frame check (``DecodeConfig.max_outside_px`` None) and, where the
@@ -18,7 +18,8 @@ overlap test (greedy by score) do not depend on gates scoring less, and the squa
 margin are checked last, in that order. The squareness settings default to the checkpoint's. Prints, per setting and dataset,
 precision, recall, PCK@2px and PCK@5px (the eval-detector rule, gates >= 20 px) and the
 smallest of precision, recall and PCK@5px over all datasets (the figures #4 sets targets for),
-best first; the checkpoint's own setting is marked. The split defaults to val, so that the
+best first; the checkpoint's own setting is marked. ``--reread-min-px`` (one value per run: it
+changes what the refiner reads) sets ``RefineConfig.reread_min_px`` for the whole run. The split defaults to val, so that the
 choice leaves the test splits for the README's figures.
 """
 
@@ -52,13 +53,14 @@ MIN_GATE_PX = 20.0
 
 
 def loose_detector(
-    path: Path, floor: float, backend: str
+    path: Path, floor: float, backend: str, reread_min_px: float | None = None
 ) -> tuple[CnnDetector, dict, RefineConfig | None]:
     """The checkpoint's detector with its refiner's threshold at ``floor``, no out-of-frame
-    check and, where it checks the zoom stage's corners for squareness, no such check; the
-    checkpoint's own setting (``threshold``, ``max_outside_px``, ``max_skew``, ``skew_min_px``);
-    and the refiner configuration to check squareness with afterwards (None: the detector
-    checks it itself, on the refiner's corners, so it cannot be varied)."""
+    check and, where it checks the zoom stage's corners for squareness, no such check (and
+    ``reread_min_px`` if given); the checkpoint's own setting (``threshold``,
+    ``max_outside_px``, ``max_skew``, ``skew_min_px``); and the refiner configuration to check
+    squareness with afterwards (None: the detector checks it itself, on the refiner's corners,
+    so it cannot be varied)."""
     model, decode_cfg, meta = load_checkpoint(path)
     refiner = load_refiner(path, meta)
     if refiner is None:
@@ -69,6 +71,9 @@ def loose_detector(
     zoom = load_zoom(path, meta)
     late = zoom is not None and own_cfg.max_skew > 0
     refiner.cfg = replace(own_cfg, threshold=floor, max_skew=0.0 if late else own_cfg.max_skew)
+    if reread_min_px is not None:
+        refiner.cfg = replace(refiner.cfg, reread_min_px=reread_min_px)
+        own_cfg = replace(own_cfg, reread_min_px=reread_min_px)
     det = CnnDetector(
         model, replace(decode_cfg, max_outside_px=None), refiner=refiner, zoom=zoom,
         int8=load_int8(path, meta), int8_weight_bits=int8_weight_bits(meta), backend=backend,
@@ -143,11 +148,17 @@ def main(argv: list[str] | None = None) -> dict:
         default=None,
         help="smallest gates checked for squareness, px (default: the checkpoint's)",
     )
+    ap.add_argument(
+        "--reread-min-px",
+        type=float,
+        default=None,
+        help="the refiner's RefineConfig.reread_min_px for the run (default: the checkpoint's)",
+    )
     ap.add_argument("--limit", type=int, default=None, help="Only the first N images of each.")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     path = Path(args.detector.partition(":")[2] or SHIPPED)
-    det, own, square = loose_detector(path, min(args.thresholds), args.backend)
+    det, own, square = loose_detector(path, min(args.thresholds), args.backend, args.reread_min_px)
     skews = args.max_skew or [own["max_skew"]]
     mins = args.skew_min_px or [own["skew_min_px"]]
     if square is None and (skews != [own["max_skew"]] or mins != [own["skew_min_px"]]):
@@ -165,7 +176,8 @@ def main(argv: list[str] | None = None) -> dict:
                      "min": round(low, 4), "by_data": per})  # fmt: skip
     rows.sort(key=lambda r: -r["min"])
     keys = ("threshold", "max_outside_px", "max_skew", "skew_min_px")
-    print(f"{args.detector} on {det.backend}, {args.split} splits")
+    reread = det.select_cfg.reread_min_px
+    print(f"{args.detector} on {det.backend}, {args.split} splits, reread_min_px {reread}")
     for r in rows:
         mark = " (the checkpoint's)" if all(r[k] == own[k] for k in keys) else ""
         cells = " | ".join(
@@ -175,7 +187,8 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"threshold {r['threshold']:<5} outside {str(r['max_outside_px']):<4} "
               f"skew {r['max_skew']:<4} from {r['skew_min_px']:<4} min {r['min']:.4f} | {cells}{mark}")  # fmt: skip
     out = {"detector": args.detector, "backend": det.backend, "split": args.split,
-           "data": [str(d) for d in data], "own": own, "rows": rows}  # fmt: skip
+           "reread_min_px": reread, "data": [str(d) for d in data], "own": own,
+           "rows": rows}  # fmt: skip
     if args.json:
         atomic_write_json(args.json, out)
     return out

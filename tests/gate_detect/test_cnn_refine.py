@@ -154,9 +154,41 @@ def test_a_second_pass_reads_again_where_the_first_put_the_corners():
     np.testing.assert_allclose(twice.prob, again.prob, atol=1e-6)
     np.testing.assert_allclose(twice.corners, again.corners, atol=1e-6)
     assert np.abs(twice.corners - once.corners).max() > 0.05
-    for bad in ({"passes": 0}, {"candidate_iou": 0.0}):
-        with pytest.raises(ValueError, match="passes must be >= 1 and candidate_iou"):
+    for bad in ({"passes": 0}, {"candidate_iou": 0.0}, {"reread_min_px": -1.0}):
+        with pytest.raises(ValueError, match="passes must be >= 1, candidate_iou in"):
             RefineNet(replace(CFG, **bad))
+
+
+class _Counting:
+    """A refiner that counts the patches it reads."""
+
+    def __init__(self, net) -> None:
+        self.net, self.patches = net, 0
+
+    def __call__(self, x, geom):
+        self.patches += len(x)
+        return self.net(x, geom)
+
+
+def test_a_candidate_the_last_pass_barely_moved_is_not_read_again():
+    img, net = gate_image(), _refiner(5)
+    far = QUAD + np.array([[4.0, 2.0], [-3.0, 3.0], [0.0, -4.0], [2.5, 0.5]])
+    gates = [(far, np.ones(4), 0.9), (QUAD + 1.0, np.ones(4), 0.8)]
+    once = verdicts(net, img, gates, CFG)
+    quads = np.stack([far, QUAD + 1.0])
+    shift = np.abs(once.corners - quads).max(axis=(1, 2)) * CFG.side / mean_sides(quads)
+    assert shift.min() > 0.0 and shift[0] != shift[1]
+    counted = _Counting(net)
+    always = verdicts(counted, img, gates, replace(CFG, passes=2))
+    assert counted.patches == 4
+    for limit, patches in ((0.5 * shift.min(), 4), (shift.mean(), 3), (2.0 * shift.max(), 2)):
+        counted.patches = 0
+        got = verdicts(counted, img, gates, replace(CFG, passes=2, reread_min_px=limit))
+        assert counted.patches == patches
+        reread = shift >= limit  # the second pass's answer for these, the first's for the rest
+        expected = np.where(reread[:, None, None], always.corners, once.corners)
+        np.testing.assert_allclose(got.corners, expected, atol=1e-4)  # (batches of other sizes)
+        np.testing.assert_allclose(got.prob, np.where(reread, always.prob, once.prob), atol=1e-6)
 
 
 def test_candidates_overlap_more_than_the_detectors_output():

@@ -20,7 +20,7 @@ corners were the better ones, so the shipped detector does not).
 
 Optionally (``RefineConfig.mirror``) each candidate is read a second time mirrored, and the two
 readings are averaged; and (``RefineConfig.passes``) read again where the last reading put its
-corners.
+corners, unless that reading barely moved them (``RefineConfig.reread_min_px``).
 
 Shapes: patches (B, 3, P, P) float in [0, 1]; network output (B, 9).
 """
@@ -75,6 +75,10 @@ class RefineConfig:
     """Readings of each candidate: each after the first reads the patch again where the last one
     put the corners, and its gate probability and corners replace the last one's (the patch is
     then better centred; on val, a second pass raised PCK@5px: README)."""
+    reread_min_px: float = 0.0
+    """A candidate is read again in the next pass only if the last reading moved one of its
+    corners by at least this many patch pixels along x or y (camera pixels times ``side`` over
+    the candidate's mean side): a patch barely moved reads nearly the same. 0: always."""
     candidate_iou: float = 0.85
     """First-stage candidates overlapping a better-scored one by more than this (intersection
     over union) are dropped before the refiner reads them (the refiner's own output is
@@ -160,8 +164,10 @@ class RefineNet(nn.Module):
         super().__init__()
         if cfg.patch % 8 or not 0 < cfg.margin < cfg.patch // 2:
             raise ValueError(f"patch must be a multiple of 8 with 0 < margin < patch/2: {cfg}")
-        if cfg.passes < 1 or not 0.0 < cfg.candidate_iou <= 1.0:
-            raise ValueError(f"passes must be >= 1 and candidate_iou in (0, 1]: {cfg}")
+        if cfg.passes < 1 or not 0.0 < cfg.candidate_iou <= 1.0 or cfg.reread_min_px < 0:
+            raise ValueError(
+                f"passes must be >= 1, candidate_iou in (0, 1] and reread_min_px >= 0: {cfg}"
+            )
         c1, c2, c3 = cfg.widths
         self.cfg = cfg
         self.features = nn.Sequential(
@@ -262,10 +268,17 @@ def verdicts(
     if not ok.any():
         return Verdicts.empty()
     quads, scores = quads[ok], stage_scores(gates)[ok]
+    logit = np.zeros(len(quads))
+    todo = np.arange(len(quads))  # the candidates read in this pass
     for _ in range(cfg.passes):
-        logit, corners = read(net, image, quads, scores, cfg, dtype)
+        logit[todo], corners = read(net, image, quads[todo], scores[todo], cfg, dtype)
         again = usable(corners)  # a reading that folded a candidate: keep the last corners
-        quads = np.where(again[:, None, None], corners, quads)
+        moved = np.where(again[:, None, None], corners, quads[todo])
+        shift = np.abs(moved - quads[todo]).max(axis=(1, 2)) * cfg.side / mean_sides(quads[todo])
+        quads[todo] = moved
+        todo = todo[shift >= cfg.reread_min_px]
+        if not len(todo):
+            break
     stage = np.array([g[2] for g in gates])[ok]
     measured = skews(quads, image.shape[1::-1]) if skew else None
     return Verdicts(1.0 / (1.0 + np.exp(-logit)), stage, quads, measured)
