@@ -305,10 +305,11 @@ def decode(
     if isinstance(out, torch.Tensor):
         out = out.detach().numpy()
     maps = np.ascontiguousarray(out, dtype=np.float32)
-    heat = 1.0 / (1.0 + np.exp(-maps[:5]))
-    thresholds = np.array([cfg.centre_threshold] + [cfg.corner_threshold] * 4, np.float32)
+    probs = np.array([cfg.centre_threshold] + [cfg.corner_threshold] * 4)
+    with np.errstate(divide="ignore"):  # the heatmaps' thresholds as logits (0, 1: -inf, inf)
+        thresholds = (np.log(probs) - np.log1p(-probs)).astype(np.float32)
     corners, corner_scores, scores, pos, kind, val = _decode(
-        heat, maps[5:], thresholds, int(cfg.max_gates), float(cfg.snap_radius), bool(cfg.nested),
+        maps, thresholds, int(cfg.max_gates), float(cfg.snap_radius), bool(cfg.nested),
         float(cfg.nested_residual), float(cfg.nms_iou), int(cfg.min_snapped),
         float(cfg.sure_centre), float(scale[0]), float(scale[1]),
     )  # fmt: skip
@@ -322,21 +323,23 @@ def decode(
 
 
 @njit(cache=True, error_model="numpy")
-def _decode(heat, reg, thresholds, max_gates, snap_radius, nested, nested_residual, nms_iou,
+def _decode(maps, thresholds, max_gates, snap_radius, nested, nested_residual, nms_iou,
             min_snapped, sure_centre, sx, sy):  # fmt: skip
-    """:func:`decode` on the network's (5, H, W) heatmaps and (10, H, W) regressions: the
-    gates' corners (G, 4, 2) pixels, corner scores (G, 4) and scores (G,), and every corner
-    peak's position (M, 2) cells, type (M,) and score (M,), by type.
+    """:func:`decode` on the network's (15, H, W) output, its heatmaps' peaks found on the
+    logits (at or above (5,) logit ``thresholds``; the sigmoid, monotonic, is taken only at the
+    peaks): the gates' corners (G, 4, 2) pixels, corner scores (G, 4) and scores (G,), and
+    every corner peak's position (M, 2) cells, type (M,) and score (M,), by type.
 
     Each centre peak's regressed gate, corners snapped, is a hypothesis; unless a better one
     overlaps it (the same gate), so are the gates nested in or around it. The hypotheses, best
     first, are then reported unless unconfirmed by their corners (``min_snapped``, ``sure_centre``)
     or overlapping a better reported one."""
-    ks, ys, xs = _peaks(heat, thresholds)
+    ks, ys, xs = _peaks(maps[:5], thresholds)
+    reg = maps[5:]
     n_centres = np.searchsorted(ks, 1)
     centre_scores = np.empty(n_centres)
     for i in range(n_centres):
-        centre_scores[i] = heat[0, ys[i], xs[i]]
+        centre_scores[i] = _sigmoid(maps[0, ys[i], xs[i]])
     order = np.argsort(-centre_scores, kind="mergesort")[:max_gates]
     p = len(order)
     centres, vectors = np.empty((p, 2)), np.empty((p, 4, 2))
@@ -351,7 +354,7 @@ def _decode(heat, reg, thresholds, max_gates, snap_radius, nested, nested_residu
     for i in range(m):
         y, x = ys[n_centres + i], xs[n_centres + i]
         pos[i, 0], pos[i, 1] = x + reg[0, y, x], y + reg[1, y, x]
-        val[i] = heat[ks[n_centres + i], y, x]
+        val[i] = _sigmoid(maps[ks[n_centres + i], y, x])
     z = pos[:, 0] + 1j * pos[:, 1]
     regressed = vectors.copy()
     for i in range(p):
@@ -395,6 +398,12 @@ def _decode(heat, reg, thresholds, max_gates, snap_radius, nested, nested_residu
             count += 1
     chosen = chosen[:count]
     return pixels[chosen], hyp_corner_scores[chosen], hyp_scores[chosen], pos, kind, val
+
+
+@njit(cache=True)
+def _sigmoid(x: np.float32) -> np.float32:
+    """The logistic function in float32 (as numpy computes it on a float32 map)."""
+    return np.float32(1.0) / (np.float32(1.0) + np.exp(-x))
 
 
 @njit(cache=True)

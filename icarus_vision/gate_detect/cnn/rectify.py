@@ -78,6 +78,34 @@ def _usable(q: np.ndarray, min_side_px: float) -> np.ndarray:
     return ok
 
 
+def settle(quads: np.ndarray, corners: np.ndarray, side: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where a reading leaves (N, 4, 2) candidates: its corrected ``corners``, or the candidate
+    as it was where they are not :func:`usable` (a reading that folded it); and (N,) how far
+    that moved each, the largest change of a corner's x or y in patch pixels (camera pixels times
+    ``side`` over the candidate's mean side)."""
+    return _settle(
+        np.ascontiguousarray(quads, np.float64).reshape(-1, 4, 2),
+        np.ascontiguousarray(corners, np.float64).reshape(-1, 4, 2),
+        float(side),
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _settle(quads: np.ndarray, corners: np.ndarray, side: float) -> tuple[np.ndarray, np.ndarray]:
+    ok = _usable(corners, 4.0)
+    out, shift = quads.copy(), np.zeros(len(quads))
+    for n in range(len(quads)):
+        sides = 0.0
+        for i in range(4):
+            j = (i + 1) % 4
+            sides += np.sqrt((quads[n, j, 0] - quads[n, i, 0]) ** 2
+                             + (quads[n, j, 1] - quads[n, i, 1]) ** 2)  # fmt: skip
+        if ok[n]:
+            out[n] = corners[n]
+            shift[n] = np.abs(corners[n] - quads[n]).max() * side / (sides / 4)
+    return out, shift
+
+
 def offsets_to_corners(
     h: np.ndarray,
     offsets: np.ndarray,

@@ -41,6 +41,7 @@ from icarus_vision.gate_detect.cnn.rectify import (
     network_patches,
     offsets_to_corners,
     patch_to_image,
+    settle,
     squareness,
     usable,
 )
@@ -272,10 +273,7 @@ def verdicts(
     todo = np.arange(len(quads))  # the candidates read in this pass
     for _ in range(cfg.passes):
         logit[todo], corners = read(net, image, quads[todo], scores[todo], cfg, dtype)
-        again = usable(corners)  # a reading that folded a candidate: keep the last corners
-        moved = np.where(again[:, None, None], corners, quads[todo])
-        shift = np.abs(moved - quads[todo]).max(axis=(1, 2)) * cfg.side / mean_sides(quads[todo])
-        quads[todo] = moved
+        quads[todo], shift = settle(quads[todo], corners, cfg.side)
         todo = todo[shift >= cfg.reread_min_px]
         if not len(todo):
             break
