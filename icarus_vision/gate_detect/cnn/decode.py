@@ -78,9 +78,9 @@ MAX_CHOICES = (MAX_PEAKS_PER_TYPE + 1) ** 4
 
 
 def peak_maps(heat: np.ndarray, thresholds: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Local maxima (3x3) of (K, H, W) probability maps at or above (K,) ``thresholds``: indices
-    (k, y, x), sorted by map, then row, then column. A value counts as a maximum if no
-    neighbour in its own map is larger (the image border counts as -inf)."""
+    """Local maxima (3x3) of (K, H, W) maps (probabilities, or logits: the decoder's) at or
+    above (K,) ``thresholds``: indices (k, y, x), sorted by map, then row, then column. A value
+    counts as a maximum if no neighbour in its own map is larger (the border counts as -inf)."""
     return _peaks(np.ascontiguousarray(heat, np.float32), np.asarray(thresholds, np.float32))
 
 
@@ -366,11 +366,8 @@ def _decode(maps, thresholds, max_gates, snap_radius, nested, nested_residual, n
     n = 0
     primary = np.zeros(p, np.bool_)
     for i in range(p):
-        hyp[n], hyp_corner_scores[n], hyp_scores[n] = (
-            snapped[i],
-            snapped_scores[i],
-            centre_scores[order[i]],
-        )
+        hyp[n], hyp_corner_scores[n] = snapped[i], snapped_scores[i]
+        hyp_scores[n] = centre_scores[order[i]]
         n += 1
         # a weaker peak of a gate already searched around is not searched again
         primary[i] = not _overlaps(snapped[i], snapped, primary[:i], nms_iou)
