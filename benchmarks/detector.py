@@ -38,19 +38,9 @@ from icarus_vision.gate_detect.evaluate import eval_detector, one_thread
 DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v2-test"
 
 
-def make(spec: str, backend: str | None = None):
-    """The detector of ``spec``; a CNN on ``backend`` if given (else its default, "auto")."""
-    if backend is None:
-        return make_detector(spec)
-    from icarus_vision.gate_detect.cnn import CnnDetector
-
-    path = spec.partition(":")[2] or None
-    return CnnDetector.load(path, backend=backend)
-
-
 def latency(spec: str, data: Path, frames: int = 50, passes: int = 5, backend=None) -> dict:
     """Median and p95 ms per ``detect`` call on one thread."""
-    det = make(spec, backend)
+    det = make_detector(spec, **({} if backend is None else {"backend": backend}))
     split = load_split(data, "test", None, frames)
     images = [read_rgb(f) for f in split.files]
     times = []
@@ -91,7 +81,7 @@ def main(argv: list[str] | None = None) -> dict:
         if spec.split(":")[0] == "cnn":  # every backend, alternating (the machine's load drifts)
             backends = ["torch", "onnxruntime"]
             try:
-                make(spec, "int8")
+                make_detector(spec, backend="int8")
                 backends.append("int8")
             except ValueError:  # no int8 copies in this checkpoint
                 pass

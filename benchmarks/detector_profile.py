@@ -175,12 +175,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = ap.parse_args(argv)
     if not (args.data / "annotations" / "test.json").is_file():
         sys.exit(f"{args.data}: no dataset; generate it first (see benchmarks/detector.py)")
-    if args.backend == "auto":
-        det = make_detector(args.detector)
-    else:
-        from icarus_vision.gate_detect.cnn import CnnDetector
-
-        det = CnnDetector.load(args.detector.partition(":")[2] or None, backend=args.backend)
+    det = make_detector(args.detector, backend=args.backend)
     if getattr(det, "refiner", None) is None:
         sys.exit(f"{args.detector}: not a CNN detector with a refiner")
     images = [read_rgb(f) for f in load_split(args.data, "test", None, args.frames).files]

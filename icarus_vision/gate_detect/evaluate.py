@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
-from icarus_vision.gate_detect.cnn import CnnDetector, cpu_description
+from icarus_vision.gate_detect.cnn import cpu_description
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.draw import draw_detections, sheet
 from icarus_vision.gate_detect.error_model import build_error_model, gate_error, viewing_angle_deg
@@ -29,7 +29,7 @@ from icarus_vision.gate_detect.metrics import (
     evaluate_image,
     summarize,
 )
-from icarus_vision.gate_detect.registry import make_detector, parse_spec
+from icarus_vision.gate_detect.registry import make_detector
 
 GATE_SIZE_M = 1.0
 """Opening side assumed to estimate the distance of a false positive from its apparent size."""
@@ -103,7 +103,7 @@ def eval_detector(
     ext = (Path(examples_path).suffix.lower() or ".jpg") if examples_path is not None else None
     if ext is not None and not cv2.haveImageWriter(f"examples{ext}"):
         raise ValueError(f"{examples_path}: cannot write an image of this type (use .jpg or .png)")
-    detector = _detector(detector_spec, backend)
+    detector = make_detector(detector_spec, **({} if backend is None else {"backend": backend}))
     data = load_split(data_dir, split, None, limit)
     gts, preds, samples, times, tiles, per_image = [], [], [], [], [], []
     n = len(data.files)
@@ -171,16 +171,6 @@ def eval_detector(
     if json_path is not None:
         atomic_write_json(json_path, report)
     return report
-
-
-def _detector(spec: str, backend: str | None):
-    """The detector of ``spec``, a CNN's networks run by ``backend`` if given."""
-    if backend is None:
-        return make_detector(spec)
-    name, path = parse_spec(spec)
-    if name != "cnn":
-        raise ValueError(f"a backend applies to the cnn detector only, not {name!r}")
-    return CnnDetector.load(path, backend=backend)
 
 
 def _sample(rec: dict, gate, k: np.ndarray) -> dict:

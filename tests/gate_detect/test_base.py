@@ -117,3 +117,11 @@ def test_oracle_reads_visibility_from_a_rendered_frame():
 def test_unknown_image_detector_lists_the_known_ones():
     with pytest.raises(ValueError, match="unknown detector .nosuch.; choose one of .*cnn.*opencv"):
         make_detector("nosuch")
+
+
+def test_settings_reach_the_detector_that_takes_them():
+    assert make_detector("cnn", backend="torch").backend == "torch"
+    with pytest.raises(ValueError, match="the opencv detector takes no setting backend"):
+        make_detector("opencv", backend="int8")
+    with pytest.raises(ValueError, match="the cnn detector takes no setting colour"):
+        make_detector("cnn", colour="red")

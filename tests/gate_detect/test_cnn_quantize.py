@@ -228,7 +228,7 @@ def test_eval_detector_runs_the_backend_asked_for(quantized, tiny_dataset, tmp_p
         assert res.exit_code == 0, res.output
         assert json.loads((tmp_path / f"{backend}.json").read_text())["backend"] == backend
     res = runner.invoke(app, [*args, "--detector", "opencv", "--backend", "int8"])
-    assert res.exit_code != 0 and "cnn detector only" in res.output
+    assert res.exit_code != 0 and "the opencv detector takes no setting backend" in res.output
     res = runner.invoke(app, [*args, "--detector", f"cnn:{out}", "--backend", "gpu"])
     assert res.exit_code != 0 and "backend must be one of" in res.output
 

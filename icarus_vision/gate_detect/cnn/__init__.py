@@ -277,15 +277,23 @@ class CnnDetector(Detector):
         return self._nets[key]
 
     @classmethod
-    def load(cls, path: str | Path | None = None, **settings) -> CnnDetector:
+    def load(
+        cls,
+        path: str | Path | None = None,
+        *,
+        threads: int | None = 1,
+        bf16: bool | None = None,
+        frozen: bool = True,
+        backend: str = "auto",
+    ) -> CnnDetector:
         """From a checkpoint folder or file (None: the shipped default), with its int8 copies
-        if it has them; ``settings``: the constructor's ``threads``, ``bf16``, ``frozen``,
-        ``backend``."""
+        if it has them; the settings as the constructor's."""
         path = SHIPPED if path is None else path
         model, decode_cfg, meta = load_checkpoint(path)
         refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
         return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=load_int8(path, meta),
-                   int8_weight_bits=int8_weight_bits(meta), **settings)  # fmt: skip
+                   int8_weight_bits=int8_weight_bits(meta), threads=threads, bf16=bf16,
+                   frozen=frozen, backend=backend)  # fmt: skip
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""
@@ -318,4 +326,4 @@ class CnnDetector(Detector):
         return self.detect_batch([image])[0]
 
 
-register_detector("cnn", lambda arg: CnnDetector.load(arg))
+register_detector("cnn", CnnDetector.load)
