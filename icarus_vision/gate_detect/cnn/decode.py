@@ -20,7 +20,7 @@ import torch
 from numba import njit
 
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
-from icarus_vision.gate_detect.cnn.polygon import quad_iou, quad_iou_kernel
+from icarus_vision.gate_detect.cnn.polygon import mean_side, quad_iou, quad_iou_kernel
 
 __all__ = ["DecodeConfig", "decode", "in_frame", "nested_gates", "peak_maps", "quad_iou", "snap"]
 
@@ -155,7 +155,7 @@ def _nested(
     (G, 4) scores."""
     c0 = centre[0] + 1j * centre[1]
     tmpl = vectors[:, 0] + 1j * vectors[:, 1]
-    side = _mean_side(vectors)
+    side = mean_side(vectors)
     # per corner type, the peaks near its direction, nearest the direction first
     pts = np.full((4, MAX_PEAKS_PER_TYPE + 1), np.nan + 0j)  # column 0: "no peak"
     vals = np.zeros((4, MAX_PEAKS_PER_TYPE + 1))
@@ -227,16 +227,6 @@ def _nested(
     return corners[:g].copy(), scores[:g].copy()
 
 
-@njit(cache=True)
-def _mean_side(q: np.ndarray) -> float:
-    """Mean side length of a (4, 2) quadrilateral."""
-    s = 0.0
-    for i in range(4):
-        j = (i + 1) % 4
-        s += np.sqrt((q[i, 0] - q[j, 0]) ** 2 + (q[i, 1] - q[j, 1]) ** 2)
-    return s / 4
-
-
 def snap(
     regressed: np.ndarray, peaks: tuple[np.ndarray, np.ndarray, np.ndarray], snap_radius: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -266,7 +256,7 @@ def _snap(
     corners = regressed.copy()
     scores = np.zeros(regressed.shape[:2])
     for i in range(len(regressed)):
-        radius = max(1.5, snap_radius * _mean_side(regressed[i]))
+        radius = max(1.5, snap_radius * mean_side(regressed[i]))
         for c in range(4):
             best, j = np.inf, -1
             for m in range(len(pos)):

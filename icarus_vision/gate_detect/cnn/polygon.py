@@ -44,6 +44,16 @@ def convex_hull4(q: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 @njit(cache=True)
+def mean_side(q: np.ndarray) -> float:
+    """Mean side length of a (4, 2) quadrilateral (compiled; ``metrics.mean_side`` in numpy)."""
+    s = 0.0
+    for i in range(4):
+        j = (i + 1) % 4
+        s += np.sqrt((q[i, 0] - q[j, 0]) ** 2 + (q[i, 1] - q[j, 1]) ** 2)
+    return s / 4
+
+
+@njit(cache=True)
 def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 

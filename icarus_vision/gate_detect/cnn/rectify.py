@@ -18,6 +18,7 @@ from numba import njit
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.homography import perspective, transform
 from icarus_vision.gate_detect.cnn.model import to_float
+from icarus_vision.gate_detect.cnn.polygon import mean_side
 
 if TYPE_CHECKING:
     from icarus_vision.gate_detect.cnn.refine import RefineConfig
@@ -95,14 +96,9 @@ def _settle(quads: np.ndarray, corners: np.ndarray, side: float) -> tuple[np.nda
     ok = _usable(corners, 4.0)
     out, shift = quads.copy(), np.zeros(len(quads))
     for n in range(len(quads)):
-        sides = 0.0
-        for i in range(4):
-            j = (i + 1) % 4
-            sides += np.sqrt((quads[n, j, 0] - quads[n, i, 0]) ** 2
-                             + (quads[n, j, 1] - quads[n, i, 1]) ** 2)  # fmt: skip
         if ok[n]:
             out[n] = corners[n]
-            shift[n] = np.abs(corners[n] - quads[n]).max() * side / (sides / 4)
+            shift[n] = np.abs(corners[n] - quads[n]).max() * side / mean_side(quads[n])
     return out, shift
 
 
