@@ -29,7 +29,7 @@ import numpy as np
 
 from icarus_vision.gate_detect import make_detector
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
-from icarus_vision.gate_detect.cnn.decode import quad_iou
+from icarus_vision.gate_detect.cnn.polygon import quad_iou
 from icarus_vision.gate_detect.metrics import evaluate_image
 
 DATA = Path(__file__).resolve().parents[1] / "datasets" / "gates-v2-20k"

@@ -70,10 +70,10 @@ def loose_detector(
            "max_skew": own_cfg.max_skew, "skew_min_px": own_cfg.skew_min_px}  # fmt: skip
     zoom = load_zoom(path, meta)
     late = zoom is not None and own_cfg.max_skew > 0
-    refiner.cfg = replace(own_cfg, threshold=floor, max_skew=0.0 if late else own_cfg.max_skew)
+    loose = {"threshold": floor, "max_skew": 0.0 if late else own_cfg.max_skew}
     if reread_min_px is not None:
-        refiner.cfg = replace(refiner.cfg, reread_min_px=reread_min_px)
-        own_cfg = replace(own_cfg, reread_min_px=reread_min_px)
+        loose["reread_min_px"] = reread_min_px
+    refiner.cfg = replace(own_cfg, **loose)
     det = CnnDetector(
         model, replace(decode_cfg, max_outside_px=None), refiner=refiner, zoom=zoom,
         int8=load_int8(path, meta), int8_weight_bits=int8_weight_bits(meta), backend=backend,

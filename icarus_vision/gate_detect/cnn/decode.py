@@ -20,9 +20,7 @@ import torch
 from numba import njit
 
 from icarus_vision.gate_detect.cnn.model import VECTOR_SCALE
-from icarus_vision.gate_detect.cnn.polygon import mean_side, quad_iou, quad_iou_kernel
-
-__all__ = ["DecodeConfig", "decode", "in_frame", "nested_gates", "peak_maps", "quad_iou", "snap"]
+from icarus_vision.gate_detect.cnn.polygon import mean_side, quad_iou_kernel
 
 
 @dataclass(frozen=True)

@@ -98,10 +98,13 @@ def transform(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
 def _transform(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
     out = np.empty_like(pts)
     for n in range(len(pts)):
-        m = h[n]
         for k in range(pts.shape[1]):
-            x, y = pts[n, k, 0], pts[n, k, 1]
-            w = x * m[2, 0] + y * m[2, 1] + m[2, 2]
-            out[n, k, 0] = (x * m[0, 0] + y * m[0, 1] + m[0, 2]) / w
-            out[n, k, 1] = (x * m[1, 0] + y * m[1, 1] + m[1, 2]) / w
+            out[n, k, 0], out[n, k, 1] = apply(h[n], pts[n, k, 0], pts[n, k, 1])
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def apply(m: np.ndarray, x: float, y: float) -> tuple[float, float]:
+    """A (3, 3) homography applied to one point (compiled code's :func:`transform`)."""
+    w = x * m[2, 0] + y * m[2, 1] + m[2, 2]
+    return (x * m[0, 0] + y * m[0, 1] + m[0, 2]) / w, (x * m[1, 0] + y * m[1, 1] + m[1, 2]) / w

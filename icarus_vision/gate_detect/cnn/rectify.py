@@ -16,7 +16,7 @@ import torch
 from numba import njit
 
 from icarus_vision.gate_detect.base import FLIP_ORDER
-from icarus_vision.gate_detect.cnn.homography import perspective, transform
+from icarus_vision.gate_detect.cnn.homography import apply, perspective, transform
 from icarus_vision.gate_detect.cnn.model import to_float
 from icarus_vision.gate_detect.cnn.polygon import mean_side
 
@@ -142,22 +142,15 @@ def _offsets_to_corners(back, offsets, mirrored, lo, side, width):
         for c in range(4):
             x = lo + side * (c == 1 or c == 2) + offsets[n, c, 0] * side
             y = lo + side * (c >= 2) + offsets[n, c, 1] * side
-            u, v = _apply(m, x, y)
+            u, v = apply(m, x, y)
             if mirrored is not None:
                 f = _FLIP[c]  # the mirrored reading's corner that is this one
                 x = width - (lo + side * (f == 1 or f == 2) + mirrored[n, f, 0] * side)
                 y = lo + side * (f >= 2) + mirrored[n, f, 1] * side
-                u2, v2 = _apply(m, x, y)
+                u2, v2 = apply(m, x, y)
                 u, v = 0.5 * (u + u2), 0.5 * (v + v2)
             out[n, c, 0], out[n, c, 1] = u, v
     return out
-
-
-@njit(cache=True, error_model="numpy")
-def _apply(m: np.ndarray, x: float, y: float) -> tuple[float, float]:
-    """A homography applied to one point."""
-    w = x * m[2, 0] + y * m[2, 1] + m[2, 2]
-    return (x * m[0, 0] + y * m[0, 1] + m[0, 2]) / w, (x * m[1, 0] + y * m[1, 1] + m[1, 2]) / w
 
 
 def corners_to_offsets(h: np.ndarray, corners: np.ndarray, cfg: RefineConfig) -> np.ndarray:

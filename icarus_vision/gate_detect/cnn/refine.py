@@ -34,6 +34,7 @@ import torch
 from torch import nn
 
 from icarus_vision.gate_detect.cnn.model import conv_bn_relu
+from icarus_vision.gate_detect.cnn.polygon import quad_iou
 from icarus_vision.gate_detect.cnn.rectify import (
     extract,
     homographies,
@@ -353,8 +354,6 @@ def select(
     Returns:
         per gate ``(corners (4, 2) px, corner_scores (4,), score)``, best first.
     """
-    from icarus_vision.gate_detect.cnn.decode import quad_iou
-
     score = v.prob * v.stage
     ok = (score >= cfg.threshold) & square_enough(v.skew, v.corners, cfg)
     keep = np.flatnonzero(ok)
