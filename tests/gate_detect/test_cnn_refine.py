@@ -293,23 +293,20 @@ def test_save_load_frozen_and_onnx_give_the_same_output(tmp_path):
     y = sess.run(None, {"patches": x.numpy(), "geometry": g.numpy()})[0]
     np.testing.assert_allclose(y, a.numpy(), atol=1e-4)
     img = gate_image()
-    # frozen (batch norm folded, traced), eager and ONNX Runtime detectors agree in float32
+    # frozen (batch norm folded, traced), eager and ONNX Runtime refiners agree in float32 on the
+    # same candidates (whole-detector decisions on an untrained map's flat peaks are too close
+    # to call across instruction sets)
     settings = [{"frozen": True, "backend": "torch", "bf16": False},
                 {"frozen": False, "backend": "torch", "bf16": False}, {"backend": "onnxruntime"}]  # fmt: skip
-    every = RefineNet(replace(CFG, threshold=0.0))  # passes the untrained networks' candidates
-    every.load_state_dict(loaded.state_dict())
-    with torch.no_grad():  # centre peaks regressing a square of 4 cells' half-side
-        corner.out.bias[0] = 0.0
-        corner.out.bias[7:15] = torch.tensor([-0.5, -0.5, 0.5, -0.5, 0.5, 0.5, -0.5, 0.5])
-    report = DecodeConfig(centre_threshold=0.0, max_outside_px=None)  # wherever they are
-    dets = [CnnDetector(corner, report, refiner=every, **kw) for kw in settings]
-    a, *others = (d.detect(img) for d in dets)
+    dets = [CnnDetector(corner, DecodeConfig(), refiner=loaded, **kw) for kw in settings]
     assert isinstance(dets[2].refiner, OnnxRuntimeNet) and isinstance(dets[2].model, OnnxRuntimeNet)
-    assert len(a) > 0
+    quads = [QUAD + shift for shift in (0.0, 30.0, -20.0)]
+    cands = [(q, np.ones(4), 0.9) for q in quads]
+    a, *others = (verdicts(d.refiner, img, cands, CFG, floor=0.0) for d in dets)
+    assert len(a.prob) == 3 and np.abs(a.corners - quads).max() > 0.01  # untrained: moves them
     for b in others:
-        assert len(a) == len(b)
-        for p, q in zip(a, b, strict=True):
-            np.testing.assert_allclose(p.corners, q.corners, atol=1e-3)
+        np.testing.assert_allclose(b.prob, a.prob, atol=1e-4)
+        np.testing.assert_allclose(b.corners, a.corners, atol=1e-3)
 
 
 def test_missing_or_corrupt_refiner_names_the_file(tmp_path):
