@@ -6,7 +6,8 @@ Usage::
     python benchmarks/detector_operating_point.py [--detector cnn[:PATH]] [--backend auto|int8|onnxruntime]
         [--data datasets/gates-v2-ft12 --data datasets/gates-v2-test5] [--split val]
         [--thresholds 0.15 0.2 0.25 0.3 0.35] [--outside none 0.5 1.5 3]
-        [--max-skew 0.3 0.4] [--skew-min-px 20 30] [--reread-min-px 2.0] [--limit N] [--json PATH]
+        [--max-skew 0.3 0.4] [--skew-min-px 20 30] [--small-skew-score 0 0.5]
+        [--reread-min-px 2.0] [--limit N] [--json PATH]
 
 Runs the detector once per frame (one thread) with the refiner's threshold at the lowest of
 ``--thresholds``, no out-of-frame check (``DecodeConfig.max_outside_px`` None) and, where the
@@ -15,7 +16,8 @@ zoom stage's corners are checked for squareness, no squareness check; then keeps
 enough (``refine.keep_square``) and with their corners within the margin of the image
 (``decode.in_frame``). That equals running the detector at that setting: a gate's score and the
 overlap test (greedy by score) do not depend on gates scoring less, and the squareness and the
-margin are checked last, in that order. The squareness settings default to the checkpoint's. Prints, per setting and dataset,
+margin are checked last, in that order. The squareness settings (``max_skew``, ``skew_min_px``,
+``small_skew_score``) default to the checkpoint's. Prints, per setting and dataset,
 precision, recall, PCK@2px and PCK@5px (the eval-detector rule, gates >= 20 px) and the
 smallest of precision, recall and PCK@5px over all datasets (the figures #4 sets targets for),
 best first; the checkpoint's own setting is marked. ``--reread-min-px`` (one value per run: it
@@ -58,7 +60,8 @@ def loose_detector(
     """The checkpoint's detector with its refiner's threshold at ``floor``, no out-of-frame
     check and, where it checks the zoom stage's corners for squareness, no such check (and
     ``reread_min_px`` if given); the checkpoint's own setting (``threshold``,
-    ``max_outside_px``, ``max_skew``, ``skew_min_px``); and the refiner configuration to check
+    ``max_outside_px``, ``max_skew``, ``skew_min_px``, ``small_skew_score``); and the refiner
+    configuration to check
     squareness with afterwards (None: the detector checks it itself, on the refiner's corners,
     so it cannot be varied)."""
     model, decode_cfg, meta = load_checkpoint(path)
@@ -67,7 +70,8 @@ def loose_detector(
         sys.exit(f"{path}: not a detector with a refiner")
     own_cfg = refiner.cfg
     own = {"threshold": own_cfg.threshold, "max_outside_px": decode_cfg.max_outside_px,
-           "max_skew": own_cfg.max_skew, "skew_min_px": own_cfg.skew_min_px}  # fmt: skip
+           "max_skew": own_cfg.max_skew, "skew_min_px": own_cfg.skew_min_px,
+           "small_skew_score": own_cfg.small_skew_score}  # fmt: skip
     zoom = load_zoom(path, meta)
     late = zoom is not None and own_cfg.max_skew > 0
     loose = {"threshold": floor, "max_skew": 0.0 if late else own_cfg.max_skew}
@@ -149,6 +153,14 @@ def main(argv: list[str] | None = None) -> dict:
         help="smallest gates checked for squareness, px (default: the checkpoint's)",
     )
     ap.add_argument(
+        "--small-skew-score",
+        type=float,
+        nargs="+",
+        default=None,
+        help="smallest score of a gate under --skew-min-px failing the squareness limit "
+        "(0: never checked; default: the checkpoint's)",
+    )
+    ap.add_argument(
         "--reread-min-px",
         type=float,
         default=None,
@@ -161,21 +173,25 @@ def main(argv: list[str] | None = None) -> dict:
     det, own, square = loose_detector(path, min(args.thresholds), args.backend, args.reread_min_px)
     skews = args.max_skew or [own["max_skew"]]
     mins = args.skew_min_px or [own["skew_min_px"]]
-    if square is None and (skews != [own["max_skew"]] or mins != [own["skew_min_px"]]):
+    smalls = args.small_skew_score or [own["small_skew_score"]]
+    checkpoint = ([own["max_skew"]], [own["skew_min_px"]], [own["small_skew_score"]])
+    if square is None and (skews, mins, smalls) != checkpoint:
         sys.exit(f"{path}: its squareness check is not the last step (no zoom stage, or no "
-                 "check), so --max-skew and --skew-min-px cannot be varied")  # fmt: skip
+                 "check), so --max-skew, --skew-min-px and --small-skew-score cannot be "
+                 "varied")  # fmt: skip
     data = args.data or DATA
     runs = {str(d): detections(det, d, args.split, args.limit) for d in data}
     rows = []
-    for t, o, k, m in itertools.product(args.thresholds, args.outside, skews, mins):
-        sq = None if square is None else replace(square, max_skew=k, skew_min_px=m)
+    for t, o, k, m, w in itertools.product(args.thresholds, args.outside, skews, mins, smalls):
+        sq = None if square is None else replace(square, max_skew=k, skew_min_px=m,
+                                                 small_skew_score=w)  # fmt: skip
         per = {name: figures(r, t, o, sq) for name, r in runs.items()}
         low = min(min(f["precision"] or 0, f["recall"] or 0, f["pck_5px"] or 0)
                   for f in per.values())  # fmt: skip
         rows.append({"threshold": t, "max_outside_px": o, "max_skew": k, "skew_min_px": m,
-                     "min": round(low, 4), "by_data": per})  # fmt: skip
+                     "small_skew_score": w, "min": round(low, 4), "by_data": per})  # fmt: skip
     rows.sort(key=lambda r: -r["min"])
-    keys = ("threshold", "max_outside_px", "max_skew", "skew_min_px")
+    keys = ("threshold", "max_outside_px", "max_skew", "skew_min_px", "small_skew_score")
     reread = det.select_cfg.reread_min_px
     print(f"{args.detector} on {det.backend}, {args.split} splits, reread_min_px {reread}")
     for r in rows:
@@ -185,7 +201,8 @@ def main(argv: list[str] | None = None) -> dict:
             for f in r["by_data"].values()
         )
         print(f"threshold {r['threshold']:<5} outside {str(r['max_outside_px']):<4} "
-              f"skew {r['max_skew']:<4} from {r['skew_min_px']:<4} min {r['min']:.4f} | {cells}{mark}")  # fmt: skip
+              f"skew {r['max_skew']:<4} from {r['skew_min_px']:<4} (under it, from score "
+              f"{r['small_skew_score']:<4}) min {r['min']:.4f} | {cells}{mark}")  # fmt: skip
     out = {"detector": args.detector, "backend": det.backend, "split": args.split,
            "reread_min_px": reread, "data": [str(d) for d in data], "own": own,
            "rows": rows}  # fmt: skip

@@ -34,6 +34,7 @@ from icarus_vision.gate_detect.cnn.refine import (
     keep_square,
     refine,
     select,
+    skews,
     snap_to_peaks,
     verdicts,
 )
@@ -527,6 +528,22 @@ def test_keep_square_checks_the_corners_it_is_given():
     assert [f[2] for f in kept] == [0.9, 0.7]  # the big 1.6:1 opening is dropped
     assert keep_square(found, (320, 240), RefineConfig()) == found  # no check
     assert keep_square([], (320, 240), RefineConfig(max_skew=0.4)) == []
+
+
+def test_a_small_gate_out_of_square_needs_a_high_score():
+    # 1.6:1 openings of 26 px (in 20-30 px) and 19.5 px (under 20 px) mean side
+    small, tiny = facing_box(32, 20, 100), facing_box(24, 15, 200)
+    cfg = RefineConfig(max_skew=0.4, skew_min_px=30.0, small_skew_score=0.5, small_skew_min_px=20.0)
+    found = [(small, np.ones(4), 0.7), (small + 40.0, np.ones(4), 0.3), (tiny, np.ones(4), 0.3)]
+    assert [f[2] for f in keep_square(found, (320, 240), cfg)] == [0.7, 0.3]
+    assert keep_square(found, (320, 240), cfg)[1][0] is tiny  # the weak 26 px one is dropped
+    assert keep_square(found, (320, 240), replace(cfg, small_skew_score=0.0)) == found
+    square = facing_box(26, 26, 100)  # square enough: kept however weak
+    assert len(keep_square([(square, np.ones(4), 0.3)], (320, 240), cfg)) == 1
+    v = Verdicts(np.array([0.7, 0.3, 0.3]), np.ones(3), np.stack([f[0] for f in found]),
+                 skews(np.stack([f[0] for f in found]), (320, 240)))  # fmt: skip
+    peaks = [(np.zeros((0, 2)), np.zeros(0))] * 4
+    assert [f[2] for f in select(v, peaks, replace(cfg, threshold=0.2))] == [0.7, 0.3]
 
 
 def test_the_detector_reports_the_refiners_gates_in_the_frame_only(monkeypatch):

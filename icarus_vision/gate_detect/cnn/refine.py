@@ -95,7 +95,14 @@ class RefineConfig:
     distractors are not, though the patch, rectified to a square, hides it. 0: no check."""
     skew_min_px: float = 30.0
     """Smallest mean side of a gate whose squareness is checked, pixels (the 3-D aspect of a
-    smaller one is too uncertain)."""
+    smaller one is too uncertain to drop it for that alone)."""
+    small_skew_score: float = 0.0
+    """A gate of ``small_skew_min_px`` up to ``skew_min_px`` that fails ``max_skew`` is reported
+    only if it scores at least this: its aspect is uncertain, so it only drops a weak candidate
+    (on val most such candidates scoring under 0.5 were distractors, most over it gates).
+    0: gates under ``skew_min_px`` are never checked."""
+    small_skew_min_px: float = 20.0
+    """Smallest mean side of a gate ``small_skew_score`` applies to, pixels."""
     square_hfov_deg: float = 0.0
     """Horizontal field of view of the nominal camera under which the refiner is also told how
     square each candidate is in 3-D (:func:`squareness`), degrees; 0: not told. (Measured on
@@ -289,13 +296,18 @@ def skews(quads: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
     return np.abs(squareness(quads, image_size, NOMINAL_HFOV_DEG)[:, 0])
 
 
-def square_enough(skew: np.ndarray | None, corners: np.ndarray, cfg: RefineConfig) -> np.ndarray:
-    """(N,) whether each of (N, 4, 2) openings passes ``cfg.max_skew`` given its
-    :func:`skews` (None: not known, passes): square enough, smaller than ``cfg.skew_min_px``,
-    or no check."""
+def square_enough(
+    skew: np.ndarray | None, corners: np.ndarray, score: np.ndarray, cfg: RefineConfig
+) -> np.ndarray:
+    """(N,) whether each of (N, 4, 2) openings with (N,) scores passes ``cfg.max_skew`` given
+    its :func:`skews` (None: not known, passes): square enough, smaller than
+    ``cfg.skew_min_px`` (and, from ``cfg.small_skew_min_px``, scoring at least
+    ``cfg.small_skew_score``), or no check."""
     if cfg.max_skew <= 0 or skew is None:
         return np.ones(len(corners), bool)
-    return (skew <= cfg.max_skew) | (mean_sides(corners) < cfg.skew_min_px)
+    side = mean_sides(corners)
+    weak = (side >= cfg.small_skew_min_px) & (score < cfg.small_skew_score)
+    return (skew <= cfg.max_skew) | ((side < cfg.skew_min_px) & ~weak)
 
 
 def keep_square(
@@ -309,7 +321,7 @@ def keep_square(
     if cfg.max_skew <= 0 or not found:
         return found
     q = np.stack([c for c, _, _ in found])
-    ok = square_enough(skews(q, image_size), q, cfg)
+    ok = square_enough(skews(q, image_size), q, np.array([s for _, _, s in found]), cfg)
     return [f for f, keep in zip(found, ok, strict=True) if keep]
 
 
@@ -355,7 +367,7 @@ def select(
         per gate ``(corners (4, 2) px, corner_scores (4,), score)``, best first.
     """
     score = v.prob * v.stage
-    ok = (score >= cfg.threshold) & square_enough(v.skew, v.corners, cfg)
+    ok = (score >= cfg.threshold) & square_enough(v.skew, v.corners, score, cfg)
     keep = np.flatnonzero(ok)
     if not len(keep):
         return []
