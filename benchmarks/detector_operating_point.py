@@ -55,6 +55,8 @@ from icarus_vision.gate_detect.metrics import evaluate_image, summarize
 ROOT = Path(__file__).resolve().parents[1]
 DATA = [ROOT / "datasets" / "gates-v2-ft12", ROOT / "datasets" / "gates-v2-test5"]
 MIN_GATE_PX = 20.0
+SETTING = ("threshold", "max_outside_px", "max_skew", "skew_min_px", "small_skew_score")
+"""What a row of the sweep varies, in order."""
 
 
 def loose_detector(
@@ -63,10 +65,9 @@ def loose_detector(
     """The checkpoint's detector with its refiner's threshold at ``floor``, no out-of-frame
     check and, where it checks the zoom stage's corners for squareness, no such check (and
     ``reread_min_px`` if given); the checkpoint's own setting (``threshold``,
-    ``max_outside_px``, ``max_skew``, ``skew_min_px``, ``small_skew_score``); and the refiner
-    configuration to check
-    squareness with afterwards (None: the detector checks it itself, on the refiner's corners,
-    so it cannot be varied)."""
+    ``max_outside_px``, ``max_skew``, ``skew_min_px``, ``small_skew_score``: :data:`SETTING`);
+    and the refiner configuration to check squareness with afterwards (None: the detector checks
+    it itself, on the refiner's corners, so it cannot be varied)."""
     model, decode_cfg, meta = load_checkpoint(path)
     refiner = load_refiner(path, meta)
     if refiner is None:
@@ -185,8 +186,8 @@ def main(argv: list[str] | None = None) -> dict:
     skews = args.max_skew or [own["max_skew"]]
     mins = args.skew_min_px or [own["skew_min_px"]]
     smalls = args.small_skew_score or [own["small_skew_score"]]
-    checkpoint = ([own["max_skew"]], [own["skew_min_px"]], [own["small_skew_score"]])
-    if square is None and (skews, mins, smalls) != checkpoint:
+    checkpoint = tuple(own[k] for k in SETTING)
+    if square is None and (skews, mins, smalls) != tuple([v] for v in checkpoint[2:]):
         sys.exit(f"{path}: its squareness check is not the last step (no zoom stage, or no "
                  "check), so --max-skew, --skew-min-px and --small-skew-score cannot be "
                  "varied")  # fmt: skip
@@ -194,23 +195,23 @@ def main(argv: list[str] | None = None) -> dict:
     runs = {str(d): detections(det, d, args.split, args.limit) for d in data}
     rows = []
     settings = list(itertools.product(args.thresholds, args.outside, skews, mins, smalls))
-    keys = ("threshold", "max_outside_px", "max_skew", "skew_min_px", "small_skew_score")
-    checkpoint_setting = tuple(own[k] for k in keys)
-    if min(args.thresholds) <= own["threshold"] and checkpoint_setting not in settings:
-        settings.append(checkpoint_setting)  # the reference the choice below is measured against
-    for t, o, k, m, w in settings:
+    if min(args.thresholds) <= own["threshold"] and checkpoint not in settings:
+        settings.append(checkpoint)  # the reference the choice below is measured against
+    for setting in settings:
+        t, o, k, m, w = setting
         sq = None if square is None else replace(square, max_skew=k, skew_min_px=m,
                                                  small_skew_score=w)  # fmt: skip
         per = {name: figures(r, t, o, sq) for name, r in runs.items()}
         low = min(min(f["precision"] or 0, f["recall"] or 0, f["pck_5px"] or 0)
                   for f in per.values())  # fmt: skip
-        rows.append({"threshold": t, "max_outside_px": o, "max_skew": k, "skew_min_px": m,
-                     "small_skew_score": w, "min": round(low, 4), "by_data": per})  # fmt: skip
+        row = dict(zip(SETTING, setting, strict=True))
+        rows.append({**row, "min": round(low, 4), "by_data": per})
     rows.sort(key=lambda r: -r["min"])
+    theirs = next((r for r in rows if tuple(r[k] for k in SETTING) == checkpoint), None)
     reread = det.select_cfg.reread_min_px
     print(f"{args.detector} on {det.backend}, {args.split} splits, reread_min_px {reread}")
     for r in rows:
-        mark = " (the checkpoint's)" if all(r[k] == own[k] for k in keys) else ""
+        mark = " (the checkpoint's)" if r is theirs else ""
         cells = " | ".join(
             "{precision:.4f} / {recall:.4f} / {pck_2px:.4f} / {pck_5px:.4f}".format(**f)
             for f in r["by_data"].values()
@@ -218,11 +219,10 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"threshold {r['threshold']:<5} outside {str(r['max_outside_px']):<4} "
               f"skew {r['max_skew']:<4} from {r['skew_min_px']:<4} (under it, from score "
               f"{r['small_skew_score']:<4}) min {r['min']:.4f} | {cells}{mark}")  # fmt: skip
-    theirs = [r for r in rows if all(r[k] == own[k] for k in keys)]
-    best = most_precise(rows, theirs[0]["min"]) if theirs else None
+    best = most_precise(rows, theirs["min"]) if theirs else None
     if best is not None:
         print("the most precise of those at least as good as the checkpoint's: "
-              + ", ".join(f"{k} {best[k]}" for k in keys) + f" (min {best['min']:.4f})")  # fmt: skip
+              + ", ".join(f"{k} {best[k]}" for k in SETTING) + f" (min {best['min']:.4f})")  # fmt: skip
     out = {"detector": args.detector, "backend": det.backend, "split": args.split,
            "reread_min_px": reread, "data": [str(d) for d in data], "own": own,
            "rows": rows, "most_precise": best}  # fmt: skip

@@ -535,8 +535,8 @@ def test_a_small_gate_out_of_square_needs_a_high_score():
     small, tiny = facing_box(32, 20, 100), facing_box(24, 15, 200)
     cfg = RefineConfig(max_skew=0.4, skew_min_px=30.0, small_skew_score=0.5, small_skew_min_px=20.0)
     found = [(small, np.ones(4), 0.7), (small + 40.0, np.ones(4), 0.3), (tiny, np.ones(4), 0.3)]
-    assert [f[2] for f in keep_square(found, (320, 240), cfg)] == [0.7, 0.3]
-    assert keep_square(found, (320, 240), cfg)[1][0] is tiny  # the weak 26 px one is dropped
+    kept = keep_square(found, (320, 240), cfg)
+    assert [f[2] for f in kept] == [0.7, 0.3] and kept[1][0] is tiny  # the weak 26 px one dropped
     assert keep_square(found, (320, 240), replace(cfg, small_skew_score=0.0)) == found
     square = facing_box(26, 26, 100)  # square enough: kept however weak
     assert len(keep_square([(square, np.ones(4), 0.3)], (320, 240), cfg)) == 1
