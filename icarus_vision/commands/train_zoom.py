@@ -46,6 +46,18 @@ def train_zoom_cmd(
         max=1.0,
         help="A patch spans this fraction of the gate's side on each side of the corner.",
     ),
+    copies: int = typer.Option(
+        2, min=0, help="Copies of each detection with its corners moved at random (--jitter)."
+    ),
+    jitter: float = typer.Option(
+        0.02, min=0.0, help="Standard deviation of the copies' corner noise, fraction of the side."
+    ),
+    wide_copies: int = typer.Option(
+        0, min=0, help="Copies more, each with one corner moved by --wide-jitter instead."
+    ),
+    wide_jitter: float = typer.Option(
+        0.15, min=0.0, help="Standard deviation of that corner's noise, fraction of the side."
+    ),
 ) -> None:
     """Train the zoom stage: it reads each corner of every gate the detector reports (at least
     20-60 px across, tuned) again in a patch zoomed in on that corner, and moves the corner.
@@ -63,7 +75,8 @@ def train_zoom_cmd(
 
     result = train_zoom(
         SHIPPED if detector is None else detector, data, out, val_dir=val, epochs=epochs,
-        seed=seed, resume=resume, config=ZoomTrainConfig(limit=limit),
+        seed=seed, resume=resume, config=ZoomTrainConfig(limit=limit, copies=copies, jitter=jitter,
+                               wide_copies=wide_copies, wide_jitter=wide_jitter),
         zoom_config=ZoomConfig(
             patch=patch, extent=extent, widths=parse_widths(widths, 4), hidden=hidden
         ),

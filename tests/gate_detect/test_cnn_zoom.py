@@ -312,6 +312,21 @@ def test_training_examples_are_the_matched_gates_corners(tiny_dataset, monkeypat
     assert np.isfinite(ex.targets).all() and (np.abs(ex.targets) < 1.5).all()
 
 
+def test_wide_copies_move_one_corner_far_and_leave_the_other_copies_as_they_were():
+    narrow = zt.ZoomTrainConfig(copies=2, jitter=0.02)
+    wide = replace(narrow, wide_copies=4000, wide_jitter=0.15)
+    before = zt.corner_noise(narrow, np.random.default_rng(3))
+    noise = zt.corner_noise(wide, np.random.default_rng(3))
+    assert noise.shape == (4002, 4, 2)
+    assert np.array_equal(noise[:2], before)  # the narrow copies: the same draws
+    far = np.linalg.norm(noise[2:], axis=-1)  # (4000, 4)
+    moved = far.argmax(axis=1)  # the wide corner, but where its draw was small
+    assert np.bincount(moved, minlength=4).min() > 800  # each corner is moved in some copies
+    rest = np.sort(far, axis=1)[:, :3]
+    assert np.median(far.max(axis=1)) > 0.15 > np.percentile(rest, 99)
+    assert 0.017 < np.sqrt((rest**2).mean() / 2) < 0.023  # the narrow spread
+
+
 def test_train_zoom_needs_a_refiner(tiny_dataset, tmp_path):
     det = save_checkpoint(tmp_path / "det", CornerNet(TINY_MODEL), DecodeConfig())
     with pytest.raises(ValueError, match="refiner"):

@@ -4,7 +4,8 @@ Examples: the detector (corner network and refiner) runs over the train splits; 
 matched to a counted labelled gate (eval-detector's rule) gives its four corner patches, cut where
 the detector put the gate, and ``copies`` more cut where its corners were moved further at random
 (``jitter`` of the side), so that the corrections are learnt over a wider spread of errors than
-the detector happens to make. The patches are cut once and kept in ``OUT/examples.npz`` (arrays
+the detector happens to make, and ``wide_copies`` with one corner moved much further
+(``wide_jitter``), as the refiner leaves a few. The patches are cut once and kept in ``OUT/examples.npz`` (arrays
 only, read without unpickling), so a resumed run does not run the detector again; while they are
 being cut, every ``CHUNK`` images are kept in ``OUT/examples.parts/``, so a run interrupted then
 and started again with the same command continues from them. Training
@@ -79,10 +80,22 @@ class ZoomTrainConfig:
     """Jittered copies of each detection."""
     jitter: float = 0.02
     """Standard deviation of their corners' noise, as a fraction of the gate's side."""
+    wide_copies: int = 0
+    """Copies more of each detection, each with one of its four corners (drawn at random) moved
+    by ``wide_jitter`` instead: the refiner leaves about 1 % of corners more than 5 px off, mostly
+    on gates of 20-30 px (a tenth to a third of the side), further than ``jitter`` teaches the
+    stage to correct."""
+    wide_jitter: float = 0.15
+    """Standard deviation of the wide copies' moved corner's noise, as a fraction of the side."""
     limit: int | None = None
     """Use only the first ``limit`` images of each split (quick runs and tests)."""
     min_gate_px: float = 20.0
     """Smallest gate trained on and counted in the validation figures, pixels."""
+
+
+CUTS = ("seed", "copies", "jitter", "min_gate_px", "wide_copies", "wide_jitter")
+"""The :class:`ZoomTrainConfig` fields the training patches depend on (with the data and the
+detector, the key of ``OUT/examples.parts/``)."""
 
 
 @dataclass
@@ -173,8 +186,7 @@ def training_examples(
             if not (g["matched"] and g["evaluable"] and g["side"] >= tcfg.min_gate_px):
                 continue
             q = g["pred_corners"][None]
-            noise = rng.normal(size=(tcfg.copies, 4, 2)) * tcfg.jitter * g["side"]
-            quads = np.concatenate([q, q + noise])
+            quads = np.concatenate([q, q + corner_noise(tcfg, rng) * g["side"]])
             h, _ = homographies(quads, cfg)
             t = to_targets(h, np.tile(g["corners"], (len(quads), 1)), cfg)
             ok = np.isfinite(t).all(axis=1) & (np.abs(t) < 1.5).all(axis=1)
@@ -192,6 +204,18 @@ def training_examples(
             chunk_p, chunk_t = [], []
     return Examples(_stack(patches, (0, cfg.patch, cfg.patch, 3), np.uint8),
                     _stack(targets, (0, 2), np.float32))  # fmt: skip
+
+
+def corner_noise(tcfg: ZoomTrainConfig, rng: np.random.Generator) -> np.ndarray:
+    """(copies + wide_copies, 4, 2) moves of one detection's corners for its jittered copies,
+    fractions of its side: every corner by ``jitter``, except one corner of each wide copy, by
+    ``wide_jitter``. The wide ones are drawn last: without them, the same draws as before."""
+    noise = rng.normal(size=(tcfg.copies + tcfg.wide_copies, 4, 2)) * tcfg.jitter
+    if tcfg.wide_copies:
+        moved = rng.integers(0, 4, tcfg.wide_copies)
+        wide = rng.normal(size=(tcfg.wide_copies, 2)) * tcfg.wide_jitter
+        noise[np.arange(tcfg.copies, len(noise)), moved] = wide
+    return noise
 
 
 def _stack(arrays: list[np.ndarray], empty: tuple[int, ...], dtype) -> np.ndarray:
@@ -423,7 +447,7 @@ def train_zoom(
         parts = []
         for k, d in enumerate(dirs):
             split = load_split(d, "train", None, cfg.limit)
-            cuts = {f: getattr(cfg, f) for f in ("seed", "copies", "jitter", "min_gate_px")}
+            cuts = {f: getattr(cfg, f) for f in CUTS}
             key = {"data": str(d), "dataset": dataset_digest(d), "images": len(split.files),
                    "detector": digest, "zoom": net.cfg.to_dict(), **cuts}  # fmt: skip
             parts.append(training_examples(det, split, net.cfg, cfg, rng, progress,
