@@ -320,7 +320,7 @@ def test_wide_copies_move_one_corner_far_and_leave_the_other_copies_as_they_were
     assert noise.shape == (4002, 4, 2)
     assert np.array_equal(noise[:2], before)  # the narrow copies: the same draws
     far = np.linalg.norm(noise[2:], axis=-1)  # (4000, 4)
-    moved = far.argmax(axis=1)  # the wide corner, but where its draw was small
+    moved = far.argmax(axis=1)  # the wide corner (a narrow one where the wide draw was small)
     assert np.bincount(moved, minlength=4).min() > 800  # each corner is moved in some copies
     rest = np.sort(far, axis=1)[:, :3]
     assert np.median(far.max(axis=1)) > 0.15 > np.percentile(rest, 99)

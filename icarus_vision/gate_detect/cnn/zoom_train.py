@@ -4,15 +4,15 @@ Examples: the detector (corner network and refiner) runs over the train splits; 
 matched to a counted labelled gate (eval-detector's rule) gives its four corner patches, cut where
 the detector put the gate, and ``copies`` more cut where its corners were moved further at random
 (``jitter`` of the side), so that the corrections are learnt over a wider spread of errors than
-the detector happens to make, and ``wide_copies`` with one corner moved much further
-(``wide_jitter``), as the refiner leaves a few. The patches are cut once and kept in ``OUT/examples.npz`` (arrays
-only, read without unpickling), so a resumed run does not run the detector again; while they are
-being cut, every ``CHUNK`` images are kept in ``OUT/examples.parts/``, so a run interrupted then
-and started again with the same command continues from them. Training
-flips half of them about their diagonal (a mirrored corner: the target's two coordinates swap)
-and jitters brightness, contrast and noise. Every epoch is validated as eval-detector would
-score the detector with the stage on the val split; at the end the smallest gate it reads
-(``min_side_px``) is tuned there.
+the detector happens to make, and ``wide_copies`` more with one corner moved much further
+(``wide_jitter``), as the refiner leaves a few. The patches are cut once and kept in
+``OUT/examples.npz`` (arrays only, read without unpickling), so a resumed run does not run the
+detector again; while they are being cut, every ``CHUNK`` images are kept in
+``OUT/examples.parts/``, so a run interrupted then and started again with the same command
+continues from them. Training flips half of them about their diagonal (a mirrored corner: the
+target's two coordinates swap) and jitters brightness, contrast and noise. Every epoch is
+validated as eval-detector would score the detector with the stage on the val split; at the end
+the smallest gate it reads (``min_side_px``) is tuned there.
 """
 
 from __future__ import annotations
