@@ -75,6 +75,7 @@ from icarus_vision.commands import tracks as _tracks  # noqa: E402,F401
 from icarus_vision.commands import train_detector as _train_detector  # noqa: E402,F401
 from icarus_vision.commands import train_policy as _train_policy  # noqa: E402,F401
 from icarus_vision.commands import train_refiner as _train_refiner  # noqa: E402,F401
+from icarus_vision.commands import train_rescorer as _train_rescorer  # noqa: E402,F401
 from icarus_vision.commands import train_zoom as _train_zoom  # noqa: E402,F401
 
 

@@ -14,7 +14,9 @@ from icarus_vision.cli import app
 runner = CliRunner()
 
 
-@pytest.mark.parametrize("cmd", ["train-detector", "train-refiner", "train-zoom", "eval-detector"])
+@pytest.mark.parametrize(
+    "cmd", ["train-detector", "train-refiner", "train-zoom", "train-rescorer", "eval-detector"]
+)
 def test_help(cmd):
     r = runner.invoke(app, [cmd, "--help"])
     assert r.exit_code == 0 and "--data" in r.output

@@ -4,7 +4,8 @@ The network (``model.py``) predicts gate-centre and corner heatmaps at a quarter
 resolution; ``decode.py`` groups corners into candidate gates. An optional second stage
 (``refine.py``) rectifies each candidate into a small patch (``rectify.py``), verifies it and
 corrects its corners; an optional third (``zoom.py``) reads each corner of a large gate again,
-zoomed in. ``runtime.py`` runs the networks (ONNX Runtime or PyTorch) on numpy arrays.
+zoomed in; an optional fourth (``rescore.py``) scores every candidate again from what the others
+measured. ``runtime.py`` runs the networks (ONNX Runtime or PyTorch) on numpy arrays.
 ``train.py`` trains the first stage on gen-dataset output, ``refine_train.py`` the second,
 ``zoom_train.py`` the third; ``checkpoint.py`` saves them as safetensors + JSON. The shipped
 default lives in ``icarus_vision/models/detector/``.
@@ -29,11 +30,21 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
     load_checkpoint,
     load_int8,
     load_refiner,
+    load_rescorer,
     load_zoom,
 )
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, in_frame
 from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
-from icarus_vision.gate_detect.cnn.refine import RefineNet, keep_square, refine
+from icarus_vision.gate_detect.cnn.polygon import quad_iou
+from icarus_vision.gate_detect.cnn.refine import (
+    RefineNet,
+    keep_square,
+    refine,
+    skews,
+    square_enough,
+    verdicts,
+)
+from icarus_vision.gate_detect.cnn.rescore import RescoreNet, features
 from icarus_vision.gate_detect.cnn.runtime import OnnxRuntimeNet, run_network
 from icarus_vision.gate_detect.cnn.zoom import ZoomNet, sharpen
 from icarus_vision.gate_detect.registry import register_detector
@@ -157,6 +168,10 @@ class CnnDetector(Detector):
             runs as the refiner does. The refiner's squareness check (``max_skew``) then takes
             the zoomed corners, the more precise ones (on val, a little more precision:
             docs/detector-history.md).
+        rescorer: a trained fourth stage (:class:`RescoreNet`, needs ``refiner`` and ``zoom``):
+            every candidate is refined and zoomed, and the rescorer's probability replaces the
+            refiner's score (its own threshold, then the same overlap, squareness and frame
+            checks).
     """
 
     name = "cnn"
@@ -173,7 +188,10 @@ class CnnDetector(Detector):
         zoom: ZoomNet | None = None,
         int8: dict[str, bytes] | None = None,
         int8_weight_bits: int | None = None,
+        rescorer: RescoreNet | None = None,
     ) -> None:
+        if rescorer is not None and (refiner is None or zoom is None):
+            raise ValueError("a rescorer needs the refiner and the zoom stage it was trained on")
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         if int8 and int8_weight_bits is None:
@@ -235,6 +253,9 @@ class CnnDetector(Detector):
         if zoom is not None:
             p = zoom.cfg.patch
             self.zoom = self._runner(zoom, (torch.zeros(2, p, p, 3).permute(0, 3, 1, 2),), "zoom")
+        self.rescorer = None if rescorer is None else rescorer.eval()
+        if rescorer is not None:  # every candidate the corner network proposes is read
+            self.decode_cfg = replace(self.decode_cfg, centre_threshold=decode_cfg.centre_threshold)
 
     def _runner(self, net: nn.Module, example: tuple, name: str) -> nn.Module | OnnxRuntimeNet:
         """A patch network as the backend runs it: its int8 copy ``name``; else batch norm
@@ -293,7 +314,7 @@ class CnnDetector(Detector):
         refiner, zoom = load_refiner(path, meta), load_zoom(path, meta)
         return cls(model, decode_cfg, refiner=refiner, zoom=zoom, int8=load_int8(path, meta),
                    int8_weight_bits=int8_weight_bits(meta), threads=threads, bf16=bf16,
-                   frozen=frozen, backend=backend)  # fmt: skip
+                   frozen=frozen, backend=backend, rescorer=load_rescorer(path, meta))  # fmt: skip
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""
@@ -307,6 +328,9 @@ class CnnDetector(Detector):
         for im, o in zip(images, out, strict=True):
             h, w = im.shape[:2]
             scale = (w / o.shape[-1], h / o.shape[-2])
+            if self.rescorer is not None:
+                results.append(self._rescored(im, *self._candidates(im, o, scale)))
+                continue
             if self.refiner is None:
                 found = decode(o, self.decode_cfg, scale)
             else:
@@ -321,6 +345,52 @@ class CnnDetector(Detector):
                 found = in_frame(found, (w, h), self.max_outside_px)
             results.append([GateDetection(c, s, score) for c, s, score in found])
         return results
+
+    def _candidates(self, image: np.ndarray, out: np.ndarray, scale: tuple[float, float]):
+        """Every candidate of one frame read by the refiner and the zoom stage: (refiner
+        probabilities (N,), first-stage scores (N,), refined corners (N, 4, 2), zoomed corners
+        (N, 4, 2)); ``out`` is the corner network's output for it."""
+        cand, _ = decode(out, self.decode_cfg, scale, with_peaks=True)
+        v = verdicts(self.refiner, image, cand, self.select_cfg, floor=0.0, skew=False)
+        zoomed = sharpen(self.zoom, image, v.corners, self.zoom_cfg) if len(v.prob) else v.corners
+        return v.prob, v.stage, v.corners, zoomed
+
+    def candidate_table(self, image: np.ndarray):
+        """What the rescorer reads about each candidate of one (H, W, 3) uint8 RGB frame:
+        (features (N, F), zoomed corners (N, 4, 2)) (``train-rescorer`` learns from these)."""
+        if self.refiner is None or self.zoom is None:
+            raise ValueError("candidate_table needs a detector with a refiner and a zoom stage")
+        image = validate_image(image)
+        x = to_float(np.stack([network_input(image, self.input_size)]))
+        o = run_network(self.model, x, dtype=torch.bfloat16 if self.bf16 else torch.float32)[0]
+        h, w = image.shape[:2]
+        prob, stage, refined, zoomed = self._candidates(
+            image, o, (w / o.shape[-1], h / o.shape[-2])
+        )
+        return features(prob, stage, refined, zoomed, (w, h)), zoomed
+
+    def _rescored(self, image, prob, stage, refined, zoomed) -> list[GateDetection]:
+        """One frame's gates by the rescorer's probability: at least its threshold, best first,
+        none overlapping a better one by more than ``nms_iou`` (refined corners), then the
+        squareness check (zoomed corners, rescored) and the frame's edge."""
+        if not len(prob):
+            return []
+        h, w = image.shape[:2]
+        p = self.rescorer.probabilities(features(prob, stage, refined, zoomed, (w, h)))
+        kept: list[int] = []
+        for i in np.argsort(-p, kind="stable"):
+            if p[i] < self.rescorer.cfg.threshold:
+                break
+            c = refined[i]
+            if np.isfinite(c).all() and all(quad_iou(c, refined[k]) <= self.nms_iou for k in kept):
+                kept.append(int(i))
+        if not kept:
+            return []
+        z = zoomed[kept]
+        square = square_enough(skews(z, (w, h)), z, p[kept], self.refine_cfg)
+        found = [(z[j], np.full(4, p[i]), float(p[i])) for j, i in enumerate(kept) if square[j]]
+        found = in_frame(found, (w, h), self.max_outside_px)
+        return [GateDetection(c, s, score) for c, s, score in found]
 
     def _detect(self, image: np.ndarray) -> list[GateDetection]:
         return self.detect_batch([image])[0]

@@ -8,7 +8,9 @@ section (:class:`~icarus_vision.gate_detect.cnn.refine.RefineConfig`); one with 
 (:class:`~icarus_vision.gate_detect.cnn.zoom.ZoomConfig`). A quantized one (``quantize.py``) also
 holds int8 ONNX copies of its networks (``model.int8.onnx``, ``refiner.int8.onnx``,
 ``zoom.int8.onnx``), and its JSON an ``int8`` section naming the float weights each was made from
-(SHA-256). Every file is written atomically.
+(SHA-256). One with a fourth stage holds ``rescore.safetensors`` and a ``rescore`` section
+(:class:`~icarus_vision.gate_detect.cnn.rescore.RescoreConfig`), added by :func:`save_rescorer`
+to a saved checkpoint. Every file is written atomically.
 ``load_checkpoint`` accepts the folder or any of its files.
 """
 
@@ -29,12 +31,14 @@ from icarus_vision.fileio import atomic_path, atomic_write_bytes, atomic_write_j
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.refine import RefineConfig, RefineNet
+from icarus_vision.gate_detect.cnn.rescore import RescoreConfig, RescoreNet
 from icarus_vision.gate_detect.cnn.zoom import ZoomConfig, ZoomNet
 
 FORMAT = "icarus-vision-detector/1"
 WEIGHTS, CONFIG, ONNX = "model.safetensors", "detector.json", "model.onnx"
 REFINER, REFINER_ONNX = "refiner.safetensors", "refiner.onnx"
 ZOOM = "zoom.safetensors"
+RESCORE = "rescore.safetensors"
 FLOAT_WEIGHTS = {"model": WEIGHTS, "refiner": REFINER, "zoom": ZOOM}
 """Each network's float weights file, by name."""
 INT8 = {name: f"{name}.int8.onnx" for name in FLOAT_WEIGHTS}
@@ -61,10 +65,10 @@ def save_checkpoint(
     """Write ``folder/model.safetensors`` and ``folder/detector.json`` (atomically), with a
     ``refiner`` (its config inside it) ``folder/refiner.safetensors`` and with a ``zoom`` stage
     ``folder/zoom.safetensors``; returns folder. Int8 copies there are deleted: they were made
-    from other weights."""
+    from other weights; so is a rescorer (it learnt other networks' outputs)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    for name in INT8.values():
+    for name in (*INT8.values(), RESCORE):
         (folder / name).unlink(missing_ok=True)
     _save_weights(model, folder / WEIGHTS)
     meta = {"format": FORMAT, "model": model.cfg.to_dict(), "decode": asdict(decode)}
@@ -148,6 +152,23 @@ def load_zoom(path: str | Path, meta: dict) -> ZoomNet | None:
     """The zoom stage of the checkpoint at ``path`` (eval mode), None if it has none; as
     :func:`load_refiner` (its ``zoom`` section and ``zoom.safetensors``)."""
     return _load_stage(path, meta, "zoom", ZOOM, "zoom-stage", ZoomNet, ZoomConfig)
+
+
+def load_rescorer(path: str | Path, meta: dict) -> RescoreNet | None:
+    """The rescorer of the checkpoint at ``path`` (eval mode), None if it has none; as
+    :func:`load_refiner` (its ``rescore`` section and ``rescore.safetensors``)."""
+    return _load_stage(path, meta, "rescore", RESCORE, "rescorer", RescoreNet, RescoreConfig)
+
+
+def save_rescorer(folder: str | Path, net: RescoreNet, record: dict) -> None:
+    """Add a rescorer to the saved checkpoint at ``folder`` (its weights, then its config and
+    ``record`` as the JSON's ``rescore`` and ``rescore_training`` sections, each atomically)."""
+    folder = resolve(folder)
+    meta = json.loads((folder / CONFIG).read_text())
+    _save_weights(net, folder / RESCORE)
+    meta["rescore"] = net.cfg.to_dict()
+    meta["rescore_training"] = record
+    atomic_write_json(folder / CONFIG, meta)
 
 
 def _load_stage(path, meta: dict, key: str, weights: str, what: str, net_cls, cfg_cls):

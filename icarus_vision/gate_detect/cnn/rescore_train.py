@@ -1,0 +1,162 @@
+"""Training the rescorer (``rescore.py``) on a trained detector's candidates.
+
+The detector (refiner and zoom stage) reads every image of the given splits as it would when
+detecting, and each candidate becomes a row: its features and whether its zoomed corners match
+a counted gate (:func:`~icarus_vision.gate_detect.cnn.rescore.labels`; candidates matching only
+uncounted gates are left out). Use images none of the detector's networks was trained on: on its
+own training images the refiner is surer than it will be on new ones. A tenth of the images
+(chosen by ``seed``) is held out; the weights of the epoch with the lowest held-out loss are kept.
+The table is saved in OUT (``candidates.npz``) and reused by a run with the same detector and
+data, so an interrupted run loses at most the images read since the last start.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from icarus_vision.fileio import atomic_path
+from icarus_vision.gate_detect.cnn.checkpoint import resolve, save_rescorer, sha256
+from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.cnn.rescore import FEATURES, RescoreConfig, RescoreNet, labels
+
+TABLE = "candidates.npz"
+
+
+@dataclass(frozen=True)
+class RescoreTrainConfig:
+    """How the rescorer is trained (recorded in ``detector.json``'s ``rescore_training``)."""
+
+    epochs: int = 40
+    batch_size: int = 512
+    lr: float = 3e-3
+    weight_decay: float = 1e-4
+    seed: int = 0
+    holdout: float = 0.1
+    """Fraction of the images held out to choose the epoch."""
+    min_gate_px: float = 20.0
+    limit: int | None = None
+    """Only the first N images of each split (quick runs)."""
+
+
+def collect(detector, data: list[Path], splits: list[str], cfg: RescoreTrainConfig,
+            progress: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """(features (N, F), labels (N,) 1/0/-1, image number (N,)) of every candidate the
+    detector reads in the splits' images."""
+    from rich.progress import track
+
+    xs, ys, imgs, n = [], [], [], 0
+    for d in data:
+        for split in splits:
+            s = load_split(d, split, None, cfg.limit)
+            items = zip(s.files, s.gates, strict=True)
+            if progress:
+                items = track(items, total=len(s.files), description=f"reading {d.name} {split}")
+            for path, gates in items:
+                x, zoomed = detector.candidate_table(read_rgb(path))
+                truth = [(g.corners, g.visibility, g.distance) for g in gates]
+                xs.append(x)
+                ys.append(labels(zoomed, truth, cfg.min_gate_px))
+                imgs.append(np.full(len(x), n))
+                n += 1
+    if not xs:
+        raise ValueError("no images to read: check --data and --splits")
+    return np.concatenate(xs), np.concatenate(ys), np.concatenate(imgs)
+
+
+def fit(x: np.ndarray, y: np.ndarray, image: np.ndarray, net_cfg: RescoreConfig,
+        cfg: RescoreTrainConfig) -> tuple[RescoreNet, list[dict]]:  # fmt: skip
+    """Train a rescorer on labelled rows (labels 1/0; the caller drops -1), holding out
+    ``cfg.holdout`` of the images; the net of the best held-out epoch and the history."""
+    rng = np.random.default_rng(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    images = np.unique(image)
+    held = np.isin(image, rng.choice(images, max(1, int(cfg.holdout * len(images))), False))
+    mean, std = x[~held].mean(0), np.maximum(x[~held].std(0), 1e-6)
+    net = RescoreNet(replace(net_cfg, mean=tuple(map(float, mean)), std=tuple(map(float, std))))
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs)
+    xt, yt = (
+        torch.tensor(x[~held], dtype=torch.float32),
+        torch.tensor(y[~held], dtype=torch.float32),
+    )
+    xh, yh = torch.tensor(x[held], dtype=torch.float32), torch.tensor(y[held], dtype=torch.float32)
+    loss_fn = torch.nn.functional.binary_cross_entropy_with_logits
+    best, best_state, history = np.inf, None, []
+    for epoch in range(1, cfg.epochs + 1):
+        net.train()
+        order = torch.from_numpy(rng.permutation(len(xt)))
+        total = 0.0
+        for i in range(0, len(order), cfg.batch_size):
+            b = order[i : i + cfg.batch_size]
+            loss = loss_fn(net(xt[b]), yt[b])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += loss.item() * len(b)
+        sched.step()
+        net.eval()
+        with torch.no_grad():
+            logit = net(xh)
+            held_loss = float(loss_fn(logit, yh))
+            acc = float(((logit > 0).float() == yh).float().mean())
+        history.append({"epoch": epoch, "loss": total / len(xt), "held_out_loss": held_loss,
+                        "held_out_accuracy": acc})  # fmt: skip
+        if held_loss < best:
+            best, best_state = held_loss, {k: v.clone() for k, v in net.state_dict().items()}
+    net.load_state_dict(best_state)
+    return net.eval(), history
+
+
+def train_rescorer(
+    detector_path: str | Path,
+    data: list[Path],
+    out: Path,
+    splits: list[str],
+    net_cfg: RescoreConfig = RescoreConfig(),
+    cfg: RescoreTrainConfig = RescoreTrainConfig(),
+    progress: bool = True,
+    log=print,
+    backend: str = "auto",
+) -> tuple[Path, list[dict]]:
+    """Copy the detector at ``detector_path`` to ``out``, train a rescorer on its candidates in
+    ``data``'s ``splits`` and add it there; returns (out, history)."""
+    from icarus_vision.gate_detect.cnn import CnnDetector
+
+    src = resolve(detector_path)
+    if not data:
+        raise ValueError("train-rescorer needs at least one --data folder")
+    out.mkdir(parents=True, exist_ok=True)
+    detector = CnnDetector.load(src, backend=backend)
+    key = {"detector": [sha256(src / f) for f in sorted(p.name for p in src.glob("*.safetensors"))
+                        if f != "rescore.safetensors"],
+           "data": [str(d) for d in data], "splits": list(splits), "limit": cfg.limit,
+           "backend": detector.backend, "features": list(FEATURES)}  # fmt: skip
+    table = out / TABLE
+    x = None
+    if table.is_file():
+        with np.load(table) as z:
+            if str(z["key"]) == repr(key):
+                x, y, image = z["x"], z["y"], z["image"]
+                log(f"reusing the candidates in {table}")
+    if x is None:
+        x, y, image = collect(detector, data, splits, cfg, progress)
+        with atomic_path(table) as tmp, open(tmp, "wb") as f:
+            np.savez(f, x=x, y=y, image=image, key=np.array(repr(key)))
+    keep = y >= 0
+    if not keep.any():
+        raise ValueError(f"the detector at {src} proposed no candidate to learn from in {data}")
+    log(f"{int(keep.sum())} candidates ({int((y == 1).sum())} gates) from {image.max() + 1} images")
+    net, history = fit(x[keep], y[keep], image[keep], net_cfg, cfg)
+    for f in src.iterdir() if out.resolve() != src.resolve() else ():
+        if f.is_file() and f.name not in ("rescore.safetensors", TABLE):
+            shutil.copy2(f, out / f.name)
+    record = {"detector": str(detector_path), "data": [str(d) for d in data], "splits": splits,
+              "config": asdict(cfg), "candidates": int(keep.sum()), "backend": detector.backend,
+              "best": min(history, key=lambda h: h["held_out_loss"])}  # fmt: skip
+    save_rescorer(out, net, record)
+    return out, history
