@@ -1,5 +1,6 @@
 """The CNN detector's operating point: its figures on val splits at each refiner threshold and
-out-of-frame margin, from one run of the detector.
+out-of-frame margin, from one run of the detector (with a rescorer, its threshold is the one
+varied).
 
 Usage::
 
@@ -44,6 +45,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
     load_checkpoint,
     load_int8,
     load_refiner,
+    load_rescorer,
     load_zoom,
 )
 from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
@@ -73,7 +75,9 @@ def loose_detector(
     if refiner is None:
         sys.exit(f"{path}: not a detector with a refiner")
     own_cfg = refiner.cfg
-    own = {"threshold": own_cfg.threshold, "max_outside_px": decode_cfg.max_outside_px,
+    rescorer = load_rescorer(path, meta)
+    threshold = own_cfg.threshold if rescorer is None else rescorer.cfg.threshold
+    own = {"threshold": threshold, "max_outside_px": decode_cfg.max_outside_px,
            "max_skew": own_cfg.max_skew, "skew_min_px": own_cfg.skew_min_px,
            "small_skew_score": own_cfg.small_skew_score}  # fmt: skip
     zoom = load_zoom(path, meta)
@@ -81,10 +85,14 @@ def loose_detector(
     loose = {"threshold": floor, "max_skew": 0.0 if late else own_cfg.max_skew}
     if reread_min_px is not None:
         loose["reread_min_px"] = reread_min_px
+    if rescorer is not None:  # its threshold is the one varied; the refiner's is not used
+        rescorer.cfg = replace(rescorer.cfg, threshold=floor)
+        loose.pop("threshold")
     refiner.cfg = replace(own_cfg, **loose)
     det = CnnDetector(
         model, replace(decode_cfg, max_outside_px=None), refiner=refiner, zoom=zoom,
         int8=load_int8(path, meta), int8_weight_bits=int8_weight_bits(meta), backend=backend,
+        rescorer=rescorer,
     )  # fmt: skip
     return det, own, own_cfg if late else None
 

@@ -18,8 +18,11 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import math
+
 import numpy as np
 import torch
+from numba import njit
 from torch import nn
 
 from icarus_vision.gate_detect.cnn.rectify import squareness
@@ -94,11 +97,11 @@ class RescoreNet(nn.Module):
             lin = [m for m in self.mlp if isinstance(m, nn.Linear)]
             self._numpy = [(m.weight.detach().double().numpy().T.copy(),
                             m.bias.detach().double().numpy().copy()) for m in lin]  # fmt: skip
-        h = (np.asarray(x, np.float64) - np.array(self.cfg.mean)) / np.array(self.cfg.std)
+            self._scale = (np.array(self.cfg.mean), np.array(self.cfg.std))
+        h = _standardise(np.ascontiguousarray(x, np.float64), *self._scale)
+        last = len(self._numpy) - 1
         for i, (w, b) in enumerate(self._numpy):
-            h = h @ w + b
-            if i < len(self._numpy) - 1:
-                h = np.maximum(h, 0.0)
+            h = _dense(h, w, b, i < last)
         return 1.0 / (1.0 + np.exp(-h[:, 0]))
 
     def load_state_dict(self, *args, **kwargs):  # the numpy copy follows new weights
@@ -106,9 +109,16 @@ class RescoreNet(nn.Module):
         return super().load_state_dict(*args, **kwargs)
 
 
-def _logit(p: np.ndarray) -> np.ndarray:
-    p = np.clip(p, PROB_EPS, 1.0 - PROB_EPS)
-    return np.log(p / (1.0 - p))
+@njit(cache=True)
+def _standardise(x, mean, std):  # pragma: no cover (compiled)
+    return (x - mean) / std
+
+
+@njit(cache=True)
+def _dense(h, w, b, relu):  # pragma: no cover (compiled)
+    """One layer of the MLP: h @ w + b, then ReLU if ``relu``."""
+    out = h @ w + b if len(h) else np.zeros((0, w.shape[1]))
+    return np.maximum(out, 0.0) if relu else out
 
 
 def features(
@@ -127,20 +137,51 @@ def features(
         zoomed: (N, 4, 2) the same after the zoom stage (as refined where it does not read).
         image_size: (W, H) of the frame.
     """
-    w, h = image_size
+    zoomed = np.ascontiguousarray(zoomed, np.float64)
+    refined = np.ascontiguousarray(refined, np.float64)
     sq_z = squareness(zoomed, image_size, NOMINAL_HFOV_DEG)
     sq_r = squareness(refined, image_size, NOMINAL_HFOV_DEG)
-    side = np.maximum(mean_sides(zoomed), 1e-3)
-    shift = np.linalg.norm(zoomed - refined, axis=2)
-    x, y = zoomed[..., 0], zoomed[..., 1]
-    border = np.minimum.reduce([x.min(1), (w - 1) - x.max(1), y.min(1), (h - 1) - y.max(1)])
-    edges = np.linalg.norm(zoomed - np.roll(zoomed, -1, axis=1), axis=2)
-    return np.stack([
-        _logit(prob), _logit(stage), np.log(side), np.abs(sq_z[:, 0]), np.abs(sq_z[:, 1]),
-        np.abs(sq_r[:, 0]), np.abs(sq_r[:, 1]), shift.mean(1) / side, shift.max(1) / side,
-        np.clip(border, -20.0, 50.0), np.clip(border / side, -1.0, 3.0),
-        np.log(edges.max(1) / np.maximum(edges.min(1), 1e-3)),
-    ], axis=1)  # fmt: skip
+    return _features(np.asarray(prob, np.float64), np.asarray(stage, np.float64), refined,
+                     zoomed, sq_z, sq_r, float(image_size[0]), float(image_size[1]))  # fmt: skip
+
+
+@njit(cache=True)
+def _features(prob, stage, refined, zoomed, sq_z, sq_r, w, h):  # pragma: no cover (compiled)
+    """:func:`features` past the squareness, compiled: a frame's few candidates made one numpy
+    call per step cost more than the arithmetic."""
+    n = len(prob)
+    out = np.empty((n, 12))
+    for i in range(n):
+        side, shift_sum, shift_max = 0.0, 0.0, 0.0
+        e_max, e_min = 0.0, np.inf
+        x_min, x_max, y_min, y_max = np.inf, -np.inf, np.inf, -np.inf
+        for k in range(4):
+            j = (k + 1) % 4
+            e = math.hypot(zoomed[i, j, 0] - zoomed[i, k, 0], zoomed[i, j, 1] - zoomed[i, k, 1])
+            side += e / 4.0
+            e_max, e_min = max(e_max, e), min(e_min, e)
+            d = math.hypot(zoomed[i, k, 0] - refined[i, k, 0], zoomed[i, k, 1] - refined[i, k, 1])
+            shift_sum += d
+            shift_max = max(shift_max, d)
+            x_min, x_max = min(x_min, zoomed[i, k, 0]), max(x_max, zoomed[i, k, 0])
+            y_min, y_max = min(y_min, zoomed[i, k, 1]), max(y_max, zoomed[i, k, 1])
+        side = max(side, 1e-3)
+        border = min(x_min, (w - 1) - x_max, y_min, (h - 1) - y_max)
+        p = min(max(prob[i], PROB_EPS), 1.0 - PROB_EPS)
+        s = min(max(stage[i], PROB_EPS), 1.0 - PROB_EPS)
+        out[i, 0] = math.log(p / (1.0 - p))
+        out[i, 1] = math.log(s / (1.0 - s))
+        out[i, 2] = math.log(side)
+        out[i, 3] = abs(sq_z[i, 0])
+        out[i, 4] = abs(sq_z[i, 1])
+        out[i, 5] = abs(sq_r[i, 0])
+        out[i, 6] = abs(sq_r[i, 1])
+        out[i, 7] = shift_sum / 4.0 / side
+        out[i, 8] = shift_max / side
+        out[i, 9] = min(max(border, -20.0), 50.0)
+        out[i, 10] = min(max(border / side, -1.0), 3.0)
+        out[i, 11] = math.log(e_max / max(e_min, 1e-3))
+    return out
 
 
 def labels(
