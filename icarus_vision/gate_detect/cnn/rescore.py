@@ -16,9 +16,8 @@ It is trained on a detector's candidates on images none of its networks saw
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import math
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
