@@ -18,7 +18,9 @@ per frame of each stage:
 - ``refiner_rest``: the rest of ``refine.verdicts`` (patch warping, geometry, corners back to
   the image, squareness);
 - ``select``: thresholds, squareness check and overlap test (``refine.select``; the check
-  after the zoom stage where there is one, ``refine.keep_square``);
+  after the zoom stage where there is one, ``refine.keep_square``); with a rescorer, its
+  features and network and the selection after it (``CnnDetector._rescored``), the zoom stage
+  then reading every candidate;
 - ``zoom_network`` and ``zoom_rest``: the zoom stage's network call and the rest of
   ``zoom.sharpen`` (corner patches, corners back to the image), if the detector has one.
 
@@ -95,6 +97,20 @@ def stage_times(det, images: list[np.ndarray]) -> tuple[dict, _Timed, _Timed]:
         )
         t3 = time.perf_counter()
         before = refiner.seconds
+        if det.rescorer is not None:  # every candidate refined and zoomed, then rescored
+            v = refine.verdicts(refiner, im, gates, det.select_cfg, floor=0.0, skew=False)
+            t4 = time.perf_counter()
+            zoom_before = zoom.seconds
+            z = sharpen(zoom, im, v.corners, det.zoom_cfg) if len(v.prob) else v.corners
+            t5 = time.perf_counter()
+            det._rescored(im, v.prob, v.stage, v.corners, z)
+            t6 = time.perf_counter()
+            net_s, zoom_s = refiner.seconds - before, zoom.seconds - zoom_before
+            times = (t1 - t0, t2 - t1, t3 - t2, net_s, t4 - t3 - net_s, t6 - t5, zoom_s,
+                     t5 - t4 - zoom_s)  # fmt: skip
+            for k, s in zip(STAGES, times, strict=True):
+                sums[k] += s
+            continue
         v = refine.verdicts(refiner, im, gates, det.select_cfg, skew=det.select_cfg.max_skew > 0)
         t4 = time.perf_counter()
         found = refine.select(v, peaks, det.select_cfg, det.nms_iou)
