@@ -59,14 +59,14 @@ def test_features_see_a_non_square_opening_and_a_moved_corner():
     assert f["zoom_shift_mean"] == pytest.approx(1.5 / 48.0)
 
 
-def test_labels_follow_eval_detectors_rule():
+def test_labels_follow_eval_detectors_matching_rule_for_every_labelled_gate():
     gate = facing_box(40, 40, 160)
     small = facing_box(12, 12, 60)
     cut = facing_box(40, 40, 10)  # partly outside the frame: not counted
     cut_vis = np.array([1 if x >= 0 else 0 for x in cut[:, 0]])
     truth = [(gate, VISIBLE, 5.0), (small, VISIBLE, 9.0), (cut, cut_vis, 5.0)]
     cands = np.stack([gate + 3.0, gate + 12.0, small, cut + 1.0, facing_box(40, 40, 260)])
-    assert labels(cands, truth, 20.0).tolist() == [1, 0, -1, -1, 0]
+    assert labels(cands, truth).tolist() == [1, 0, 1, 1, 0]
 
 
 def test_numpy_probabilities_are_the_networks():
@@ -176,7 +176,7 @@ def test_train_rescorer_writes_a_detector_that_loads_and_reuses_its_table(
 
     monkeypatch.setattr(CnnDetector, "candidate_table", candidate_table)
     det = _detector(tmp_path / "ck")
-    cfg = rt.RescoreTrainConfig(epochs=2, min_gate_px=8.0)
+    cfg = rt.RescoreTrainConfig(epochs=2)
     logs = []
     out, history = rt.train_rescorer(det, [tiny_dataset], tmp_path / "r", ["train", "val"],
                                      RescoreConfig(hidden=(4,)), cfg, progress=False,

@@ -4,7 +4,7 @@ The refiner's probability times the first stage's score ranks candidates; the sq
 then drops some. Neither looks at what the later stages measured: how far the zoom stage moved
 the corners, how square the opening is in 3-D on either set of corners, how near the frame's edge
 it lies. The rescorer reads those twelve numbers (:data:`FEATURES`) per candidate and returns the
-probability that the candidate, as the zoom stage leaves it, matches a counted gate under
+probability that the candidate, as the zoom stage leaves it, matches a labelled gate under
 eval-detector's rule (``gate_detect/metrics.py``). The detector then keeps candidates scoring at
 least ``RescoreConfig.threshold``, best first, as before. Measured on val: the same precision with
 more recall and PCK@5px (docs/detector-history.md).
@@ -26,7 +26,7 @@ from torch import nn
 
 from icarus_vision.gate_detect.cnn.rectify import squareness
 from icarus_vision.gate_detect.cnn.refine import NOMINAL_HFOV_DEG
-from icarus_vision.gate_detect.metrics import evaluable, mean_sides
+from icarus_vision.gate_detect.metrics import mean_sides
 
 FEATURES = (
     "logit_refiner", "logit_stage", "log_side", "skew_zoom", "cos_zoom", "skew_refined",
@@ -183,19 +183,16 @@ def _features(prob, stage, refined, zoomed, sq_z, sq_r, w, h):  # pragma: no cov
     return out
 
 
-def labels(
-    zoomed: np.ndarray, truth: list[tuple[np.ndarray, np.ndarray, float]], min_gate_px: float
-) -> np.ndarray:
-    """(N,) per candidate: 1 if its corners match a counted gate under eval-detector's rule
-    (mean corner distance at most max(4 px, a quarter of the gate's side)), -1 if they match
-    only gates that are not counted (too small, cut by the frame, hidden corners: no label),
-    0 if they match no labelled gate."""
+def labels(zoomed: np.ndarray, truth: list[tuple[np.ndarray, np.ndarray, float]]) -> np.ndarray:
+    """(N,) per candidate: 1 if its corners match a labelled gate under eval-detector's rule (mean
+    corner distance at most max(4 px, a quarter of the gate's side)), else 0. Every labelled gate
+    counts, also those eval-detector does not (under 20 px, cut by the frame's edge, with hidden
+    corners): they are gates, the estimator uses the small ones, and on val a rescorer taught so
+    scored higher on the counted ones too (docs/detector-history.md)."""
     y = np.zeros(len(zoomed), int)
-    for corners, vis, _ in truth:
+    for corners, _, _ in truth:
         if not np.isfinite(corners).all():
             continue
         side = float(mean_sides(corners[None])[0])
-        near = np.linalg.norm(zoomed - corners, axis=2).mean(1) <= max(4.0, 0.25 * side)
-        counted = evaluable(corners, vis) and side >= min_gate_px
-        y[near] = np.where(counted, 1, np.where(y[near] == 1, 1, -1))
+        y[np.linalg.norm(zoomed - corners, axis=2).mean(1) <= max(4.0, 0.25 * side)] = 1
     return y

@@ -2,8 +2,7 @@
 
 The detector (refiner and zoom stage) reads every image of the given splits as it would when
 detecting, and each candidate becomes a row: its features and whether its zoomed corners match
-a counted gate (:func:`~icarus_vision.gate_detect.cnn.rescore.labels`; candidates matching only
-uncounted gates are left out). Use images none of the detector's networks was trained on: on its
+a labelled gate (:func:`~icarus_vision.gate_detect.cnn.rescore.labels`). Use images none of the detector's networks was trained on: on its
 own training images the refiner is surer than it will be on new ones. A tenth of the images
 (chosen by ``seed``) is held out; the weights of the epoch with the lowest held-out loss are kept.
 The table is saved in OUT (``candidates.npz``) and reused by a run with the same detector and
@@ -25,6 +24,8 @@ from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.rescore import FEATURES, RescoreConfig, RescoreNet, labels
 
 TABLE = "candidates.npz"
+LABELS = "matches any labelled gate"
+"""What a row's label means (part of the table's key: a table labelled otherwise is read again)."""
 
 
 @dataclass(frozen=True)
@@ -38,15 +39,14 @@ class RescoreTrainConfig:
     seed: int = 0
     holdout: float = 0.1
     """Fraction of the images held out to choose the epoch."""
-    min_gate_px: float = 20.0
     limit: int | None = None
     """Only the first N images of each split (quick runs)."""
 
 
 def collect(detector, data: list[Path], splits: list[str], cfg: RescoreTrainConfig,
             progress: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """(features (N, F), labels (N,) 1/0/-1, image number (N,)) of every candidate the
-    detector reads in the splits' images."""
+    """(features (N, F), labels (N,) 1/0, image number (N,)) of every candidate the detector
+    reads in the splits' images."""
     from rich.progress import track
 
     xs, ys, imgs, n = [], [], [], 0
@@ -60,7 +60,7 @@ def collect(detector, data: list[Path], splits: list[str], cfg: RescoreTrainConf
                 x, zoomed = detector.candidate_table(read_rgb(path))
                 truth = [(g.corners, g.visibility, g.distance) for g in gates]
                 xs.append(x)
-                ys.append(labels(zoomed, truth, cfg.min_gate_px))
+                ys.append(labels(zoomed, truth))
                 imgs.append(np.full(len(x), n))
                 n += 1
     if not xs:
@@ -70,7 +70,7 @@ def collect(detector, data: list[Path], splits: list[str], cfg: RescoreTrainConf
 
 def fit(x: np.ndarray, y: np.ndarray, image: np.ndarray, net_cfg: RescoreConfig,
         cfg: RescoreTrainConfig) -> tuple[RescoreNet, list[dict]]:  # fmt: skip
-    """Train a rescorer on labelled rows (labels 1/0; the caller drops -1), holding out
+    """Train a rescorer on labelled rows (labels 1/0), holding out
     ``cfg.holdout`` of the images; the net of the best held-out epoch and the history."""
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
@@ -135,7 +135,7 @@ def train_rescorer(
     key = {"detector": [sha256(src / f) for f in sorted(p.name for p in src.glob("*.safetensors"))
                         if f != "rescore.safetensors"],
            "data": [str(d) for d in data], "splits": list(splits), "limit": cfg.limit,
-           "backend": detector.backend, "features": list(FEATURES)}  # fmt: skip
+           "backend": detector.backend, "features": list(FEATURES), "labels": LABELS}  # fmt: skip
     table = out / TABLE
     x = None
     if table.is_file():
@@ -147,16 +147,15 @@ def train_rescorer(
         x, y, image = collect(detector, data, splits, cfg, progress)
         with atomic_path(table) as tmp, open(tmp, "wb") as f:
             np.savez(f, x=x, y=y, image=image, key=np.array(repr(key)))
-    keep = y >= 0
-    if not keep.any():
+    if not len(y):
         raise ValueError(f"the detector at {src} proposed no candidate to learn from in {data}")
-    log(f"{int(keep.sum())} candidates ({int((y == 1).sum())} gates) from {image.max() + 1} images")
-    net, history = fit(x[keep], y[keep], image[keep], net_cfg, cfg)
+    log(f"{len(y)} candidates ({int(y.sum())} gates) from {image.max() + 1} images")
+    net, history = fit(x, y, image, net_cfg, cfg)
     for f in src.iterdir() if out.resolve() != src.resolve() else ():
         if f.is_file() and f.name not in ("rescore.safetensors", TABLE):
             shutil.copy2(f, out / f.name)
     record = {"detector": str(detector_path), "data": [str(d) for d in data], "splits": splits,
-              "config": asdict(cfg), "candidates": int(keep.sum()), "backend": detector.backend,
+              "config": asdict(cfg), "candidates": len(y), "labels": LABELS, "backend": detector.backend,
               "best": min(history, key=lambda h: h["held_out_loss"])}  # fmt: skip
     save_rescorer(out, net, record)
     return out, history
