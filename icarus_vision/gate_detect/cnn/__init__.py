@@ -40,11 +40,10 @@ from icarus_vision.gate_detect.cnn.refine import (
     RefineNet,
     keep_square,
     refine,
-    skews,
     square_enough,
     verdicts,
 )
-from icarus_vision.gate_detect.cnn.rescore import RescoreNet, features
+from icarus_vision.gate_detect.cnn.rescore import FEATURES, RescoreNet, features
 from icarus_vision.gate_detect.cnn.runtime import OnnxRuntimeNet, run_network
 from icarus_vision.gate_detect.cnn.zoom import ZoomNet, sharpen
 from icarus_vision.gate_detect.registry import register_detector
@@ -376,7 +375,8 @@ class CnnDetector(Detector):
         if not len(prob):
             return []
         h, w = image.shape[:2]
-        p = self.rescorer.probabilities(features(prob, stage, refined, zoomed, (w, h)))
+        x = features(prob, stage, refined, zoomed, (w, h))
+        p = self.rescorer.probabilities(x)
         kept: list[int] = []
         for i in np.argsort(-p, kind="stable"):
             if p[i] < self.rescorer.cfg.threshold:
@@ -387,7 +387,8 @@ class CnnDetector(Detector):
         if not kept:
             return []
         z = zoomed[kept]
-        square = square_enough(skews(z, (w, h)), z, p[kept], self.refine_cfg)
+        skew = x[kept, FEATURES.index("skew_zoom")]  # :func:`skews` of the zoomed corners
+        square = square_enough(skew, z, p[kept], self.refine_cfg)
         found = [(z[j], np.full(4, p[i]), float(p[i])) for j, i in enumerate(kept) if square[j]]
         found = in_frame(found, (w, h), self.max_outside_px)
         return [GateDetection(c, s, score) for c, s, score in found]
