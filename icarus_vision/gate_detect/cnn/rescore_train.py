@@ -130,6 +130,9 @@ def train_rescorer(
     src = resolve(detector_path)
     if not data:
         raise ValueError("train-rescorer needs at least one --data folder")
+    for d in data:
+        if not Path(d).is_dir():
+            raise FileNotFoundError(f"{d}: dataset folder not found")
     out.mkdir(parents=True, exist_ok=True)
     detector = CnnDetector.load(src, backend=backend)
     key = {"detector": [sha256(src / f) for f in sorted(p.name for p in src.glob("*.safetensors"))
