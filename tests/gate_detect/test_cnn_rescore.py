@@ -196,3 +196,32 @@ def test_train_rescorer_writes_a_detector_that_loads_and_reuses_its_table(
                       RescoreConfig(hidden=(4,)), cfg, progress=False, log=logs.append,
                       backend="torch")  # fmt: skip
     assert any("reusing" in line for line in logs)
+
+
+def test_train_rescorer_interrupted_while_reading_continues_from_its_parts(
+    tiny_dataset, tmp_path, monkeypatch
+):
+    calls, stop = [], [5]
+
+    def candidate_table(self, image):
+        calls.append(1)
+        if len(calls) == stop[0]:
+            raise KeyboardInterrupt
+        quads = np.stack([facing_box(20, 20, 40 + len(calls), 40), facing_box(30, 30, 100, 60)])
+        return features(np.full(2, 0.5), np.full(2, 0.5), quads, quads, (160, 120)), quads
+
+    monkeypatch.setattr(CnnDetector, "candidate_table", candidate_table)
+    monkeypatch.setattr(rt, "PART", 3)
+    det = _detector(tmp_path / "ck")
+    kw = {"net_cfg": RescoreConfig(hidden=(4,)), "cfg": rt.RescoreTrainConfig(epochs=1),
+          "progress": False, "log": lambda s: None, "backend": "torch"}  # fmt: skip
+    with pytest.raises(KeyboardInterrupt):
+        rt.train_rescorer(det, [tiny_dataset], tmp_path / "r", ["train"], **kw)
+    assert sorted(p.name for p in (tmp_path / "r" / rt.PARTS).iterdir()) == ["00000.npz"]
+    calls.clear()
+    stop[0] = 0  # no second interruption
+    rt.train_rescorer(det, [tiny_dataset], tmp_path / "r", ["train"], **kw)
+    assert len(calls) == 8 - 3  # the first part was read back, not read again
+    assert not (tmp_path / "r" / rt.PARTS).exists()
+    table = np.load(tmp_path / "r" / "candidates.npz")
+    assert table["image"].tolist() == [i for i in range(8) for _ in range(2)]

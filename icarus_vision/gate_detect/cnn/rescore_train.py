@@ -6,7 +6,8 @@ a labelled gate (:func:`~icarus_vision.gate_detect.cnn.rescore.labels`). Use ima
 own training images the refiner is surer than it will be on new ones. A tenth of the images
 (chosen by ``seed``) is held out; the weights of the epoch with the lowest held-out loss are kept.
 The table is saved in OUT (``candidates.npz``) and reused by a run with the same detector and
-data, so an interrupted run loses at most the images read since the last start.
+data; while it is read, every thousand images' rows are saved in ``OUT/candidates.parts/``, so
+the same command started again after Ctrl-C continues from the last full thousand.
 """
 
 from __future__ import annotations
@@ -24,6 +25,10 @@ from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
 from icarus_vision.gate_detect.cnn.rescore import FEATURES, RescoreConfig, RescoreNet, labels
 
 TABLE = "candidates.npz"
+PARTS = "candidates.parts"
+"""OUT's folder of the table's parts while it is read (removed once the table is saved)."""
+PART = 1000
+"""Images a part holds."""
 LABELS = "matches any labelled gate"
 """What a row's label means (part of the table's key: a table labelled otherwise is read again)."""
 
@@ -44,27 +49,49 @@ class RescoreTrainConfig:
 
 
 def collect(detector, data: list[Path], splits: list[str], cfg: RescoreTrainConfig,
-            progress: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+            progress: bool = False, parts: Path | None = None,
+            key: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """(features (N, F), labels (N,) 1/0, image number (N,)) of every candidate the detector
-    reads in the splits' images."""
+    reads in the splits' images. With ``parts`` (a folder), each :data:`PART` images' rows are
+    saved there as they are read, under ``key``, and parts saved under the same key are read
+    back instead: an interrupted run continues where it stopped."""
     from rich.progress import track
 
-    xs, ys, imgs, n = [], [], [], 0
+    items = []
     for d in data:
         for split in splits:
             s = load_split(d, split, None, cfg.limit)
-            items = zip(s.files, s.gates, strict=True)
-            if progress:
-                items = track(items, total=len(s.files), description=f"reading {d.name} {split}")
-            for path, gates in items:
-                x, zoomed = detector.candidate_table(read_rgb(path))
-                truth = [(g.corners, g.visibility, g.distance) for g in gates]
-                xs.append(x)
-                ys.append(labels(zoomed, truth))
-                imgs.append(np.full(len(x), n))
-                n += 1
-    if not xs:
+            items += zip(s.files, s.gates, strict=True)
+    if not items:
         raise ValueError("no images to read: check --data and --splits")
+    if parts is not None:
+        parts.mkdir(parents=True, exist_ok=True)
+    chunks = range(0, len(items), PART)
+    if progress:
+        chunks = track(chunks, description=f"reading {len(items)} images, {PART} a part")
+    xs, ys, imgs = [], [], []
+    for start in chunks:
+        f = None if parts is None else parts / f"{start // PART:05d}.npz"
+        if f is not None and f.is_file():
+            with np.load(f) as z:
+                if str(z["key"]) == key:
+                    xs.append(z["x"])
+                    ys.append(z["y"])
+                    imgs.append(z["image"])
+                    continue
+        px, py, pi = [np.zeros((0, len(FEATURES)))], [np.zeros(0, int)], [np.zeros(0, int)]
+        for n, (path, gates) in enumerate(items[start : start + PART], start):
+            x, zoomed = detector.candidate_table(read_rgb(path))
+            px.append(x)
+            py.append(labels(zoomed, [(g.corners, g.visibility, g.distance) for g in gates]))
+            pi.append(np.full(len(x), n))
+        px, py, pi = np.concatenate(px), np.concatenate(py), np.concatenate(pi)
+        if f is not None:
+            with atomic_path(f) as tmp, open(tmp, "wb") as fh:
+                np.savez(fh, x=px, y=py, image=pi, key=np.array(key))
+        xs.append(px)
+        ys.append(py)
+        imgs.append(pi)
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(imgs)
 
 
@@ -147,9 +174,10 @@ def train_rescorer(
                 x, y, image = z["x"], z["y"], z["image"]
                 log(f"reusing the candidates in {table}")
     if x is None:
-        x, y, image = collect(detector, data, splits, cfg, progress)
+        x, y, image = collect(detector, data, splits, cfg, progress, out / PARTS, repr(key))
         with atomic_path(table) as tmp, open(tmp, "wb") as f:
             np.savez(f, x=x, y=y, image=image, key=np.array(repr(key)))
+        shutil.rmtree(out / PARTS, ignore_errors=True)
     if not len(y):
         raise ValueError(f"the detector at {src} proposed no candidate to learn from in {data}")
     log(f"{len(y)} candidates ({int(y.sum())} gates) from {image.max() + 1} images")
