@@ -45,8 +45,9 @@ def train_rescorer_cmd(
     The detector reads every image of the splits as when detecting (a progress bar); the
     candidates are kept in OUT/candidates.npz, which a second run with the same detector and
     data reuses. While they are read, each thousand images' rows are saved in
-    OUT/candidates.parts/: after Ctrl-C the same command continues from there. Writes OUT as a complete detector checkpoint (the detector's files plus
-    rescore.safetensors). Use it with --detector cnn:OUT.
+    OUT/candidates.parts/: after Ctrl-C the same command continues from there. Writes OUT as a
+    complete detector checkpoint (the detector's files plus rescore.safetensors). Use it with
+    --detector cnn:OUT.
     """
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
     from icarus_vision.gate_detect.cnn.rescore import RescoreConfig

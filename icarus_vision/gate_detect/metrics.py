@@ -41,6 +41,12 @@ def mean_side(corners: np.ndarray) -> float:
     return float(mean_sides(corners))
 
 
+def match_tolerance(side: float) -> float:
+    """Largest mean corner distance at which a detection matches a gate of mean side ``side``
+    px (the module docstring's rule)."""
+    return max(4.0, 0.25 * side)
+
+
 def match(
     pred: list[np.ndarray], scores: list[float], truth: list[np.ndarray]
 ) -> dict[int, tuple[int, float]]:
@@ -56,7 +62,7 @@ def match(
     """
     out: dict[int, tuple[int, float]] = {}
     taken: set[int] = set()
-    tol = [max(4.0, 0.25 * mean_side(t)) for t in truth]
+    tol = [match_tolerance(mean_side(t)) for t in truth]
     for i in np.argsort(-np.asarray(scores, float), kind="stable"):
         best, best_d = -1, np.inf
         for j, t in enumerate(truth):

@@ -35,10 +35,10 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
 )
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, in_frame
 from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
-from icarus_vision.gate_detect.cnn.polygon import quad_iou
 from icarus_vision.gate_detect.cnn.refine import (
     RefineNet,
     keep_square,
+    non_overlapping,
     refine,
     square_enough,
     verdicts,
@@ -234,8 +234,11 @@ class CnnDetector(Detector):
         self.refiner = None
         if refiner is not None:
             # No candidate whose centre scores under the refiner's threshold can pass it (its
-            # score is at most the centre's), so none is decoded: the same output, faster.
-            floor = max(decode_cfg.centre_threshold, refiner.cfg.threshold)
+            # score is at most the centre's), so none is decoded: the same output, faster. A
+            # rescorer has its own threshold and reads every candidate.
+            floor = decode_cfg.centre_threshold
+            if rescorer is None:
+                floor = max(floor, refiner.cfg.threshold)
             self.decode_cfg = replace(
                 decode_cfg, centre_threshold=floor, nms_iou=refiner.cfg.candidate_iou
             )
@@ -253,8 +256,6 @@ class CnnDetector(Detector):
             p = zoom.cfg.patch
             self.zoom = self._runner(zoom, (torch.zeros(2, p, p, 3).permute(0, 3, 1, 2),), "zoom")
         self.rescorer = None if rescorer is None else rescorer.eval()
-        if rescorer is not None:  # every candidate the corner network proposes is read
-            self.decode_cfg = replace(self.decode_cfg, centre_threshold=decode_cfg.centre_threshold)
 
     def _runner(self, net: nn.Module, example: tuple, name: str) -> nn.Module | OnnxRuntimeNet:
         """A patch network as the backend runs it: its int8 copy ``name``; else batch norm
@@ -317,16 +318,9 @@ class CnnDetector(Detector):
 
     def detect_batch(self, images: list[np.ndarray]) -> list[list[GateDetection]]:
         """:meth:`detect` of several (H, W, 3) uint8 RGB images in one forward pass."""
-        images = [validate_image(im) for im in images]
-        if not images:
-            return []
-        x = to_float(np.stack([network_input(im, self.input_size) for im in images]))
-        dtype = torch.bfloat16 if self.bf16 else torch.float32
-        out = run_network(self.model, x, dtype=dtype)
         results = []
-        for im, o in zip(images, out, strict=True):
+        for im, o, scale in self._corner_maps(images):
             h, w = im.shape[:2]
-            scale = (w / o.shape[-1], h / o.shape[-2])
             if self.rescorer is not None:
                 results.append(self._rescored(im, *self._candidates(im, o, scale)))
                 continue
@@ -345,6 +339,17 @@ class CnnDetector(Detector):
             results.append([GateDetection(c, s, score) for c, s, score in found])
         return results
 
+    def _corner_maps(self, images: list[np.ndarray]):
+        """Per image (validated): (image, the corner network's maps, their scale to the image's
+        pixels (x, y)), the network run once on all of them."""
+        images = [validate_image(im) for im in images]
+        if not images:
+            return []
+        x = to_float(np.stack([network_input(im, self.input_size) for im in images]))
+        out = run_network(self.model, x, dtype=torch.bfloat16 if self.bf16 else torch.float32)
+        return [(im, o, (im.shape[1] / o.shape[-1], im.shape[0] / o.shape[-2]))
+                for im, o in zip(images, out, strict=True)]  # fmt: skip
+
     def _candidates(self, image: np.ndarray, out: np.ndarray, scale: tuple[float, float]):
         """Every candidate of one frame read by the refiner and the zoom stage: (refiner
         probabilities (N,), first-stage scores (N,), refined corners (N, 4, 2), zoomed corners
@@ -359,14 +364,9 @@ class CnnDetector(Detector):
         (features (N, F), zoomed corners (N, 4, 2)) (``train-rescorer`` learns from these)."""
         if self.refiner is None or self.zoom is None:
             raise ValueError("candidate_table needs a detector with a refiner and a zoom stage")
-        image = validate_image(image)
-        x = to_float(np.stack([network_input(image, self.input_size)]))
-        o = run_network(self.model, x, dtype=torch.bfloat16 if self.bf16 else torch.float32)[0]
-        h, w = image.shape[:2]
-        prob, stage, refined, zoomed = self._candidates(
-            image, o, (w / o.shape[-1], h / o.shape[-2])
-        )
-        return features(prob, stage, refined, zoomed, (w, h)), zoomed
+        image, o, scale = self._corner_maps([image])[0]
+        prob, stage, refined, zoomed = self._candidates(image, o, scale)
+        return features(prob, stage, refined, zoomed, image.shape[1::-1]), zoomed
 
     def _rescored(self, image, prob, stage, refined, zoomed) -> list[GateDetection]:
         """One frame's gates by the rescorer's probability: at least its threshold, best first,
@@ -377,14 +377,10 @@ class CnnDetector(Detector):
         h, w = image.shape[:2]
         x = features(prob, stage, refined, zoomed, (w, h))
         p = self.rescorer.probabilities(x)
-        kept: list[int] = []
-        for i in np.argsort(-p, kind="stable"):
-            if p[i] < self.rescorer.cfg.threshold:
-                break
-            c = refined[i]
-            if np.isfinite(c).all() and all(quad_iou(c, refined[k]) <= self.nms_iou for k in kept):
-                kept.append(int(i))
-        if not kept:
+        order = np.argsort(-p, kind="stable")
+        order = order[p[order] >= self.rescorer.cfg.threshold]
+        kept = order[non_overlapping(refined[order], self.nms_iou)]
+        if not len(kept):
             return []
         z = zoomed[kept]
         skew = x[kept, FEATURES.index("skew_zoom")]  # :func:`skews` of the zoomed corners

@@ -373,12 +373,18 @@ def select(
         return []
     keep = keep[np.argsort(-score[keep], kind="stable")]
     corners, snapped = snap_to_peaks(v.corners[keep], peaks, cfg)
-    found: list[tuple[np.ndarray, np.ndarray, float]] = []
-    for c, s, p, sc in zip(corners, snapped, v.prob[keep], score[keep], strict=True):
-        if not np.isfinite(c).all() or any(quad_iou(c, f[0]) > nms_iou for f in found):
-            continue
-        found.append((c, np.where(s > 0, s, p), float(sc)))
-    return found
+    return [(corners[j], np.where(snapped[j] > 0, snapped[j], v.prob[keep[j]]), float(score[keep[j]]))
+            for j in non_overlapping(corners, nms_iou)]  # fmt: skip
+
+
+def non_overlapping(quads: np.ndarray, nms_iou: float) -> list[int]:
+    """Indices of the (N, 4, 2) quadrilaterals, given best first, that are finite and overlap
+    no earlier kept one by more than ``nms_iou`` (intersection over union): greedy NMS."""
+    kept: list[int] = []
+    for i, c in enumerate(quads):
+        if np.isfinite(c).all() and all(quad_iou(c, quads[k]) <= nms_iou for k in kept):
+            kept.append(i)
+    return kept
 
 
 def refine(

@@ -26,7 +26,7 @@ from torch import nn
 
 from icarus_vision.gate_detect.cnn.rectify import squareness
 from icarus_vision.gate_detect.cnn.refine import NOMINAL_HFOV_DEG
-from icarus_vision.gate_detect.metrics import mean_sides
+from icarus_vision.gate_detect.metrics import match_tolerance, mean_side
 
 FEATURES = (
     "logit_refiner", "logit_stage", "log_side", "skew_zoom", "cos_zoom", "skew_refined",
@@ -193,6 +193,8 @@ def labels(zoomed: np.ndarray, truth: list[tuple[np.ndarray, np.ndarray, float]]
     for corners, _, _ in truth:
         if not np.isfinite(corners).all():
             continue
-        side = float(mean_sides(corners[None])[0])
-        y[np.linalg.norm(zoomed - corners, axis=2).mean(1) <= max(4.0, 0.25 * side)] = 1
+        near = np.linalg.norm(zoomed - corners, axis=2).mean(1) <= match_tolerance(
+            mean_side(corners)
+        )
+        y[near] = 1
     return y
