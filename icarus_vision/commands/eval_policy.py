@@ -15,12 +15,28 @@ from icarus_vision.cli import app, console, user_errors
 @user_errors
 def eval_policy_cmd(
     policy: str = typer.Option(
-        "default", help="Exported policy path, 'default' (shipped) or 'scripted'."
+        "auto",
+        help="auto (the track's shipped specialist if there is one, else the generalist), default "
+        "(the generalist), a shipped name such as grand-prix-specialist, an exported policy path, "
+        "or scripted.",
     ),
     track: str = typer.Option(
         None, help="Built-in track name or TOML path (default: random tracks)."
     ),
     gates: int = typer.Option(10, min=1, help="Gates per random track."),
+    difficulty: float = typer.Option(
+        None,
+        min=0.0,
+        max=1.0,
+        help="Random tracks: race layouts of this difficulty (0 classic ranges to 1 the full "
+        "ranges and motifs; see race_track). Default: the classic random_track layouts.",
+    ),
+    plan: bool = typer.Option(
+        False,
+        "--plan",
+        help="Solve the track's time-optimal plan when none is cached, for time_optimal_s and "
+        "time_optimal_ratio (a cached plan is always used).",
+    ),
     episodes: int = typer.Option(100, min=1, help="Episodes."),
     backend: str = typer.Option("batched", help="batched or pybullet."),
     randomize: bool = typer.Option(
@@ -29,14 +45,21 @@ def eval_policy_cmd(
     seed: int = typer.Option(0, help="Random seed."),
     json_path: Path = typer.Option(None, "--json", help="Write the results to this JSON file."),
 ) -> None:
-    """Fly a policy for N episodes and report success, crashes, gates, lap times and speed."""
-    from icarus_vision.fileio import atomic_write_json
-    from icarus_vision.policy.evaluate import evaluate_policy
-    from icarus_vision.policy.pilots import resolve_policy
+    """Fly a policy for N episodes and report success, crashes, gates, lap times and speed.
 
-    pilot = resolve_policy(policy)
+    On a fixed track with a time-optimal plan (cached by `plan`, or solved with --plan) it also
+    reports time_optimal_s and time_optimal_ratio: the median lap over the plan's minimum time.
+    """
+    from icarus_vision.fileio import atomic_write_json
+    from icarus_vision.policy.evaluate import evaluate_policy, time_optimal_fields
+    from icarus_vision.policy.pilots import resolve_policy
+    from icarus_vision.sim.builtin import resolve_track
+
+    base = None if track is None else resolve_track(track)
+    pilot = resolve_policy(policy, track=base)
     r = evaluate_policy(pilot, track, episodes=episodes, num_gates=gates, backend=backend,
-                        randomize=randomize, seed=seed)  # fmt: skip
+                        randomize=randomize, seed=seed, difficulty=difficulty)  # fmt: skip
+    r.update(time_optimal_fields(base, r["lap_time_s"]["median"], solve=plan))
     table = Table(title=f"eval-policy: {r['policy']} on {r['track']} ({r['backend']})")
     table.add_column("metric")
     table.add_column("value")
@@ -54,6 +77,10 @@ def eval_policy_cmd(
         ),
         ("max / mean speed [m/s]", f"{r['max_speed_mps']:.1f} / {r['mean_speed_mps']:.1f}"),
     ]
+    if r["time_optimal_s"] is not None:
+        ratio = r["time_optimal_ratio"]
+        rows.append(("time-optimal [s] / median lap ratio",
+                     f"{r['time_optimal_s']:.2f} / {'-' if ratio is None else f'{ratio:.3f}'}"))  # fmt: skip
     for k, v in rows:
         table.add_row(escape(k), escape(v))
     console.print(table)

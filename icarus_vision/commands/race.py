@@ -25,7 +25,10 @@ def race_cmd(
         "cnn", help="cnn[:PATH], opencv, or oracle (true gate position, no camera)."
     ),
     policy: str = typer.Option(
-        "default", help="Exported policy path, 'default' (shipped) or 'scripted'."
+        "auto",
+        help="auto (the track's shipped specialist if there is one, else the generalist), default "
+        "(the generalist), a shipped name such as grand-prix-specialist, an exported policy path, "
+        "or scripted.",
     ),
     backend: str = typer.Option(
         "pybullet", help="Physics backend: pybullet or batched (camera renders via PyBullet)."
@@ -62,9 +65,8 @@ def race_cmd(
         atomic_write_json(json_path, r)
     crash = result.pos[-1] if r["crashed"] else None
     title = f"{r['track']} · {r['policy']} · {r['detector']}"
-    plot_trajectory(
-        out / "trajectory.png", result.track, result.t, result.pos, result.speed, crash, title=title
-    )
+    plot_trajectory(out / "trajectory.png", result.track, result.t, result.pos, result.speed,
+                    crash, title=title, ghost=result.ghost)  # fmt: skip
     video_path = None
     if want_video:
         video_path = video or out / "race.mp4"
@@ -89,12 +91,9 @@ def race_cmd(
         ),
     ]
     if r["time_optimal_s"] is not None:
-        rows.append(
-            (
-                "time-optimal [s] / ratio",
-                f"{r['time_optimal_s']:.2f} / {r['time_optimal_ratio']:.2f}",
-            )
-        )
+        ratio = r["time_optimal_ratio"]
+        ratio_text = "-" if ratio is None else f"{ratio:.2f}"
+        rows.append(("time-optimal [s] / ratio", f"{r['time_optimal_s']:.2f} / {ratio_text}"))
     table = Table(title=f"race: {escape(title)} · {r['backend']}")
     table.add_column("metric")
     table.add_column("value")

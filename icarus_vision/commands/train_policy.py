@@ -24,7 +24,21 @@ def train_policy_cmd(
     config: Path = typer.Option(
         None, help="Training config TOML (keys of TrainConfig; `preset` picks the base)."
     ),
-    preset: str = typer.Option(None, help="Start from a preset: fast (default) or classic."),
+    preset: str = typer.Option(
+        None,
+        help="Start from a preset: fast (default), classic, racing (the racing generalist) or "
+        "specialist (the default with --track).",
+    ),
+    track: str = typer.Option(
+        None,
+        help="Train a specialist on this track (built-in name or TOML path) instead of random "
+        "tracks; without --config or --preset the specialist preset is used.",
+    ),
+    init: str = typer.Option(
+        None,
+        help="Start the actor from an exported policy: default (the shipped generalist), a shipped "
+        "name or a path. Its observation and layers must match the config's.",
+    ),
     timesteps: int = typer.Option(
         None, min=1, help="Environment steps (default: the config's total_timesteps)."
     ),
@@ -47,7 +61,14 @@ def train_policy_cmd(
     else:
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-        cfg = PRESETS[preset or "fast"]
+        cfg = PRESETS[preset or ("specialist" if track is not None else "fast")]
+    if track is not None:
+        from icarus_vision.sim.builtin import resolve_track
+
+        resolve_track(track)  # a bad name or file fails before anything is written
+        cfg = replace(cfg, track=track)
+    if init is not None:
+        cfg = replace(cfg, init=init)
     if error_model is not None:
         if not error_model.is_file():
             raise FileNotFoundError(f"{error_model}: error model file not found")

@@ -38,10 +38,18 @@ class CurriculumCallback(BaseCallback):
     def _apply(self) -> None:
         env = self.venv if self.venv is not None else self.training_env
         env.env_method("set_num_gates", self.num_gates)
+        if self.cfg.difficulty is not None:
+            env.env_method("set_difficulty", self.difficulty)
 
     @property
     def num_gates(self) -> int:
         return self.cfg.stages[self.stage]
+
+    @property
+    def difficulty(self) -> float | None:
+        """Race-layout difficulty of the current stage (None: classic layouts)."""
+        d = self.cfg.difficulty
+        return None if d is None else float(d[self.stage])
 
     def _on_training_start(self) -> None:
         self._apply()
@@ -49,6 +57,8 @@ class CurriculumCallback(BaseCallback):
     def record(self, info: dict) -> bool:
         """Count one finished episode; returns True when this promoted the curriculum."""
         if info.get("gates_total") != self.num_gates:
+            return False
+        if self.cfg.difficulty is not None and info.get("difficulty") != self.difficulty:
             return False
         self.window.append(episode_success(info))
         rate = float(np.mean(self.window))
@@ -58,8 +68,9 @@ class CurriculumCallback(BaseCallback):
                 self.window.clear()
                 self._apply()
                 if self.verbose:
+                    layout = "" if self.difficulty is None else f", difficulty {self.difficulty:g}"
                     print(
-                        f"curriculum: success {rate:.0%} -> stage {self.stage} ({self.num_gates} gates)"
+                        f"curriculum: success {rate:.0%} -> stage {self.stage} ({self.num_gates} gates{layout})"
                     )
                 if self.on_promote:
                     self.on_promote(self.stage)
@@ -74,6 +85,8 @@ class CurriculumCallback(BaseCallback):
             self.record(self.locals["infos"][i])
         self.logger.record("curriculum/stage", self.stage)
         self.logger.record("curriculum/num_gates", self.num_gates)
+        if self.difficulty is not None:
+            self.logger.record("curriculum/difficulty", self.difficulty)
         self.logger.record("curriculum/success_rate", self.success_rate())
         return True
 
@@ -122,6 +135,40 @@ class RunningAdvantageNorm(BaseCallback):
         adv[...] = (adv - self.stats.mean) / (self.stats.std + 1e-8)
         self.logger.record("train/adv_running_mean", self.stats.mean)
         self.logger.record("train/adv_running_std", self.stats.std)
+
+    def _on_step(self) -> bool:
+        return True
+
+
+class CriticWarmup(BaseCallback):
+    """Trains only the value network until ``steps`` environment steps have been taken.
+
+    A policy started from an exported actor meets a value network that knows nothing yet; the
+    first PPO updates would follow its random advantages and undo what the actor knew. Freezing
+    the actor (and its log-std) for the first rollouts lets the critic catch up.
+    """
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = steps
+
+    def _actor_params(self) -> list:
+        pol = self.model.policy
+        return [
+            *pol.mlp_extractor.policy_net.parameters(),
+            *pol.action_net.parameters(),
+            pol.log_std,
+        ]
+
+    def _on_rollout_end(self) -> None:
+        frozen = self.num_timesteps < self.steps
+        for param in self._actor_params():
+            param.requires_grad_(not frozen)
+        self.logger.record("train/actor_frozen", float(frozen))
+
+    def _on_training_end(self) -> None:
+        for param in self._actor_params():
+            param.requires_grad_(True)
 
     def _on_step(self) -> bool:
         return True

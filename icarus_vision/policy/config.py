@@ -7,7 +7,14 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 
 from icarus_vision.fileio import read_toml
-from icarus_vision.sim.config import RandomizationConfig, RewardConfig
+from icarus_vision.sim.config import (
+    PROGRESS_REWARD,
+    RACING_LINE_REWARD,
+    RandomizationConfig,
+    RewardConfig,
+)
+
+REWARD_PRESETS = ("progress", "racing", "racing-line")
 
 
 @dataclass(frozen=True)
@@ -53,6 +60,10 @@ class CurriculumConfig:
 
     stages: tuple[int, ...] = (1, 3, 5, 10)
     """Gates per episode at each stage."""
+    difficulty: tuple[float, ...] | None = None
+    """Race-layout difficulty at each stage (same length as ``stages``; see ``race_track``), so
+    the curriculum widens the layouts as well as lengthening them; None: the classic
+    ``random_track`` layouts at every stage."""
     promote_success: float = 0.8
     """Success rate (all gates, no crash) over the window needed to promote."""
     window: int = 100
@@ -77,6 +88,8 @@ class PerceptionNoiseConfig:
     """Probability of a missed detection at zero distance (the last estimate is held)."""
     miss_per_m: float = 0.01
     """Growth of the miss probability per metre."""
+    out_of_view: bool = False
+    """A gate outside the camera's field of view is never seen (its last estimate is held)."""
 
 
 @dataclass(frozen=True)
@@ -98,12 +111,21 @@ class TrainConfig:
     perception: PerceptionNoiseConfig = field(default_factory=PerceptionNoiseConfig)
     """Perception noise on the gate observation."""
     reward: str = "progress"
-    """"progress" (the simulation core's reward) or "racing" (adds speed toward the gate and a
-    time penalty)."""
+    """"progress" (the simulation core's reward), "racing" (adds speed toward the gate and a
+    time penalty) or "racing-line" (progress along the segment between gates, small smoothness
+    and perception costs; ``sim.config.RACING_LINE_REWARD``)."""
     observation: str = "basic"
     """"basic" (15-D) or "extended" (21-D: adds the next gate's direction and the gate after)."""
     max_episode_s: float | None = None
     """Episode time limit; None: the environment default (5 s + 3 s per gate)."""
+    track: str | None = None
+    """Fixed track (built-in name or TOML path) for a specialist; None: random tracks with the
+    curriculum. With a track the curriculum has one stage: the whole track."""
+    init: str | None = None
+    """Start the actor from an exported policy (``default`` or a path); None: from scratch."""
+    init_critic_steps: int = 0
+    """With ``init``: environment steps during which only the value network learns, so the first
+    policy updates do not follow a random critic."""
     checkpoint_every: int = 1_000_000
     """Environment steps between checkpoints."""
     eval_every: int = 1_000_000
@@ -116,8 +138,15 @@ class TrainConfig:
 
     def reward_config(self) -> RewardConfig:
         if self.reward == "progress":
-            return RewardConfig()
+            return PROGRESS_REWARD
+        if self.reward == "racing-line":
+            return RACING_LINE_REWARD
         return RewardConfig(speed=0.5, time=-1.0)
+
+    def difficulty(self, stage: int) -> float | None:
+        """Race-layout difficulty at curriculum ``stage`` (None: classic layouts)."""
+        d = self.curriculum.difficulty
+        return None if d is None else float(d[stage])
 
 
 def validate_train_config(c: TrainConfig) -> None:
@@ -144,11 +173,21 @@ def validate_train_config(c: TrainConfig) -> None:
         ("curriculum.promote_success", 0 < c.curriculum.promote_success <= 1),
         ("curriculum.window", c.curriculum.window >= 1),
         ("curriculum.min_episodes", 1 <= c.curriculum.min_episodes),
-        ("reward", c.reward in ("progress", "racing")),
+        (
+            "curriculum.difficulty",
+            c.curriculum.difficulty is None
+            or (
+                len(c.curriculum.difficulty) == len(c.curriculum.stages)
+                and all(0 <= d <= 1 for d in c.curriculum.difficulty)
+            ),
+        ),
+        ("reward", c.reward in REWARD_PRESETS),
         ("observation", c.observation in ("basic", "extended")),
         ("checkpoint_every", c.checkpoint_every >= 1),
         ("eval_every", c.eval_every >= 1),
         ("eval_episodes", c.eval_episodes >= 1),
+        ("init_critic_steps", c.init_critic_steps >= 0),
+        ("max_episode_s", c.max_episode_s is None or c.max_episode_s > 0),
     ]
     for name, ok in checks:
         if not ok:
@@ -182,7 +221,37 @@ CLASSIC = TrainConfig(
     ),
 )
 FAST = TrainConfig(preset="fast")
-PRESETS = {"classic": CLASSIC, "fast": FAST}
+RACING = TrainConfig(
+    preset="racing",
+    total_timesteps=200_000_000,
+    ppo=replace(FAST.ppo, learning_rate=5e-4, log_std_init=-1.0),
+    curriculum=CurriculumConfig(
+        stages=(5, 10, 10, 10, 10), difficulty=(0.25, 0.25, 0.5, 0.75, 1.0)
+    ),
+    perception=PerceptionNoiseConfig(out_of_view=True),
+    reward="racing-line",
+    observation="extended",
+    init="classic",
+    init_critic_steps=2_000_000,
+    checkpoint_every=5_000_000,
+    eval_every=5_000_000,
+    eval_episodes=128,
+)
+"""The racing generalist: fine-tunes the classic generalist with the racing-line reward on race
+layouts whose difficulty grows with the curriculum; gates outside the camera's view are not seen."""
+SPECIALIST = replace(
+    RACING,
+    preset="specialist",
+    total_timesteps=25_000_000,
+    ppo=replace(RACING.ppo, learning_rate=3e-4),
+    init="default",
+    init_critic_steps=1_000_000,
+    checkpoint_every=2_500_000,
+    eval_every=2_500_000,
+    eval_episodes=64,
+)
+"""A specialist: the shipped generalist fine-tuned on one track (set ``track``), randomisation on."""
+PRESETS = {"classic": CLASSIC, "fast": FAST, "racing": RACING, "specialist": SPECIALIST}
 
 
 def _from_table(cls, table: dict, where: str):

@@ -9,7 +9,9 @@ from icarus_vision.policy.export import ExportedPolicy
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
+from icarus_vision.sim.quad import QuadParams
 from icarus_vision.sim.registration import make_env
+from icarus_vision.sim.track import Track
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
 
@@ -51,6 +53,7 @@ def evaluate_policy(
     backend: str = "batched",
     randomize: bool = False,
     seed: int = 0,
+    difficulty: float | None = None,
 ) -> dict:
     """Fly ``episodes`` episodes and report success, crashes, gates, lap times and speeds.
 
@@ -60,6 +63,8 @@ def evaluate_policy(
             new track per episode, seeded).
         backend: "batched" (all episodes at once, one drone each) or "pybullet" (one after another).
         randomize: domain randomisation (mass, thrust, wind, gate jitter).
+        difficulty: random tracks only: None draws classic ``random_track`` layouts, a value in
+            [0, 1] ``race_track`` layouts of that difficulty.
 
     Returns:
         The eval-policy JSON fields of ARCHITECTURE.md plus crash reasons and mean speed.
@@ -70,7 +75,7 @@ def evaluate_policy(
     base = None if track is None else resolve_track(track)
     cfg = EnvConfig(
         track=base, random_tracks=base is None, num_gates=num_gates if base is None else None,
-        randomization=RandomizationConfig(enabled=randomize), observation=obs_mode,
+        layout_difficulty=difficulty if base is None else None, randomization=RandomizationConfig(enabled=randomize), observation=obs_mode,
     )  # fmt: skip
     if backend == "batched":
         results = _run_batched(policy, cfg, episodes, seed)
@@ -80,8 +85,45 @@ def evaluate_policy(
         raise ValueError(f"unknown backend {backend!r}; choose batched or pybullet")
     name = policy.name if isinstance(policy, ExportedPolicy) else policy
     track_name = base.name if base is not None else f"random-{num_gates}"
+    if base is None and difficulty is not None:
+        track_name = f"race-{num_gates}-d{difficulty:g}"
     return {"policy": name, "track": track_name, "backend": backend, "randomize": randomize,
             "seed": seed, **_summary(results)}  # fmt: skip
+
+
+def time_optimal_fields(
+    track: Track | None,
+    median_lap: float | None,
+    *,
+    solve: bool = False,
+    quad: QuadParams | None = None,
+) -> dict:
+    """``time_optimal_s`` and ``time_optimal_ratio`` (median lap / plan) for an evaluation.
+
+    Args:
+        track: the fixed track flown (None: random tracks, both fields null).
+        median_lap: the median lap of the successful episodes, s (None: ratio null).
+        solve: plan the track when no plan is cached (the plan is cached for next time).
+    """
+    from icarus_vision.planning.cache import load_cached
+
+    quad = quad or QuadParams()
+    out = {"time_optimal_s": None, "time_optimal_ratio": None}
+    if track is None:
+        return out
+    hit = load_cached(track, quad)
+    if hit is not None:
+        best = hit.time_optimal_s
+    elif solve:
+        from icarus_vision.planning.command import run_plan
+
+        best = run_plan(track, quad)["time_optimal_s"]
+    else:
+        return out
+    out["time_optimal_s"] = round(float(best), 4)
+    if median_lap is not None:
+        out["time_optimal_ratio"] = round(float(median_lap) / float(best), 4)
+    return out
 
 
 def _episode(info: dict, speeds: list[float]) -> dict:

@@ -153,3 +153,37 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
     if weights[0][0].shape[1] != feature_dim(desc["obs_dim"]) or weights[-1][0].shape[0] != 4:
         raise ValueError(f"{st}: layer shapes do not match the description in {js.name}")
     return ExportedPolicy(weights, desc, st)
+
+
+def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
+    """Copy an exported policy's actor into a fresh stable-baselines3 PPO model (fine-tuning).
+
+    Args:
+        model: PPO with an MlpPolicy whose actor has the exported policy's hidden layers.
+        spec: ``default`` (the shipped generalist), a shipped name, or a path to an exported policy.
+        observation: the run's observation (``basic`` or ``extended``), which the policy must read.
+
+    Raises:
+        ValueError: the policy reads another observation or its layers differ from the model's.
+    """
+    import torch
+
+    from icarus_vision.policy.pilots import shipped_policy_path
+
+    path = shipped_policy_path(spec) or spec
+    policy = load_policy(path, expect_obs_dim=OBS_DIMS[observation])
+    pol = model.policy
+    layers = [m for m in pol.mlp_extractor.policy_net if hasattr(m, "weight")]
+    layers.append(pol.action_net)
+    if len(layers) != len(policy.weights) or any(
+        tuple(layer.weight.shape) != w.shape
+        for layer, (w, _) in zip(layers, policy.weights, strict=True)
+    ):
+        raise ValueError(
+            f"{policy.path}: its layers {policy.desc['hidden']} do not match this run's ppo.net_arch"
+        )
+    with torch.no_grad():
+        for layer, (w, b) in zip(layers, policy.weights, strict=True):
+            layer.weight.copy_(torch.from_numpy(w))
+            layer.bias.copy_(torch.from_numpy(b))
+    return policy

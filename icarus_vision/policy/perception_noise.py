@@ -5,7 +5,9 @@ vector: each step the detector "sees" the next gate with probability 1 − miss(
 estimated world position is redrawn around the truth with standard deviation σ(d) per axis (d = the
 distance to the gate); on a miss the last estimate is held (as the estimator carries it through
 odometry) and the relative vector is recomputed from the drone's current position. A new target
-gate always starts with a fresh draw (the map prior).
+gate always starts with a fresh draw (the map prior). With ``out_of_view`` set, a gate outside the
+camera's field of view is never seen (the detector cannot find what the camera does not show), so
+a policy that turns the camera away from the next gate flies on a stale estimate.
 
 σ(d) and miss(d) come from a detector error model file written by ``eval-detector`` when one is
 given, otherwise from a linear parametric default.
@@ -21,6 +23,8 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from icarus_vision.policy.config import PerceptionNoiseConfig
+from icarus_vision.sim.dynamics import quat_to_rot, rpy_to_quat
+from icarus_vision.sim.quad import CameraParams
 
 GATE = slice(12, 15)
 
@@ -82,11 +86,39 @@ class ErrorModel:
         return cls.load(cfg.error_model) if cfg.error_model else cls.parametric(cfg)
 
 
+def gate_in_view(obs: np.ndarray, camera: CameraParams) -> np.ndarray:
+    """(N,) bool: the next gate's centre lies inside the camera's image.
+
+    Args:
+        obs: (N, D) observations: rpy in obs[:, 6:9], world-frame gate vector in obs[:, 12:15].
+        camera: the FPV camera (field of view, resolution, uptilt).
+    """
+    rot = quat_to_rot(rpy_to_quat(obs[:, 6:9].astype(np.float64)))
+    body = np.einsum("nji,nj->ni", rot, obs[:, GATE].astype(np.float64))  # world -> body (FLU)
+    tilt = np.radians(camera.uptilt_deg)
+    c, s = np.cos(tilt), np.sin(tilt)
+    forward = c * body[:, 0] + s * body[:, 2]
+    up = -s * body[:, 0] + c * body[:, 2]
+    tan_h = np.tan(np.radians(camera.hfov_deg) / 2)
+    tan_v = tan_h * camera.height / camera.width
+    ahead = forward > 1e-6
+    f = np.where(ahead, forward, 1.0)
+    return ahead & (np.abs(body[:, 1] / f) <= tan_h) & (np.abs(up / f) <= tan_v)
+
+
 class PerceptionNoise:
     """Batched noise state for N drones; ``apply`` maps true observations to perceived ones."""
 
-    def __init__(self, model: ErrorModel, n: int, seed: int | None = None) -> None:
+    def __init__(
+        self,
+        model: ErrorModel,
+        n: int,
+        seed: int | None = None,
+        camera: CameraParams | None = None,
+    ) -> None:
+        """``camera``: when given, gates outside its field of view are never seen."""
         self.model = model
+        self.camera = camera
         self.rng = np.random.default_rng(seed)
         self.est = np.zeros((n, 3))
         self.true_prev = np.full((n, 3), np.nan)
@@ -107,7 +139,10 @@ class PerceptionNoise:
         switched = ~(np.abs(true_gate - self.true_prev) < 1e-3).all(axis=1)
         if new_episode is not None:
             switched |= new_episode
-        seen = switched | (self.rng.random(len(obs)) >= self.model.miss(dist))
+        detected = self.rng.random(len(obs)) >= self.model.miss(dist)
+        if self.camera is not None:
+            detected &= gate_in_view(obs, self.camera)
+        seen = switched | detected
         noise = self.rng.normal(size=(len(obs), 3)) * self.model.sigma(dist)[:, None]
         self.est = np.where(seen[:, None], true_gate + noise, self.est)
         self.true_prev = true_gate
@@ -119,9 +154,15 @@ class PerceptionNoise:
 class PerceptionNoiseVecEnv(VecEnvWrapper):
     """Applies ``PerceptionNoise`` to a VecEnv's observations (world-frame gate vectors)."""
 
-    def __init__(self, venv: VecEnv, model: ErrorModel, seed: int | None = None) -> None:
+    def __init__(
+        self,
+        venv: VecEnv,
+        model: ErrorModel,
+        seed: int | None = None,
+        camera: CameraParams | None = None,
+    ) -> None:
         super().__init__(venv)
-        self.noise = PerceptionNoise(model, venv.num_envs, seed)
+        self.noise = PerceptionNoise(model, venv.num_envs, seed, camera)
 
     def reset(self) -> np.ndarray:
         return self.noise.apply(self.venv.reset(), np.ones(self.num_envs, bool))

@@ -17,22 +17,24 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.policy.callbacks import (
+    CriticWarmup,
     CurriculumCallback,
     MetricsCallback,
     RunningAdvantageNorm,
     episode_success,
 )
-from icarus_vision.policy.config import TrainConfig, config_to_dict
-from icarus_vision.policy.export import export_sb3_policy
+from icarus_vision.policy.config import CurriculumConfig, TrainConfig, config_to_dict
+from icarus_vision.policy.export import export_sb3_policy, load_init_actor
 from icarus_vision.policy.features import FeatureVecEnv
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
+from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
 from icarus_vision.sim.quad import QuadParams
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
@@ -48,11 +50,28 @@ class TrainResult:
     policy_path: Path
 
 
-def make_train_env(cfg: TrainConfig, num_envs: int, num_gates: int, seed: int):
-    """The training VecEnv stack: batched drones -> perception noise -> policy features."""
+def curriculum_of(cfg: TrainConfig) -> CurriculumConfig:
+    """The curriculum a run follows: the config's, or one stage (the whole track) for a specialist."""
+    if cfg.track is None:
+        return cfg.curriculum
+    n = len(resolve_track(cfg.track).gates)
+    return replace(cfg.curriculum, stages=(n,), difficulty=None)
+
+
+def make_train_env(
+    cfg: TrainConfig, num_envs: int, num_gates: int, seed: int, difficulty: float | None = None
+):
+    """The training VecEnv stack: batched drones -> perception noise -> policy features.
+
+    Random tracks of ``num_gates`` gates at layout ``difficulty`` (None: classic layouts), or the
+    config's fixed ``track``.
+    """
+    track = None if cfg.track is None else resolve_track(cfg.track)
     env_cfg = EnvConfig(
-        random_tracks=True,
+        track=track,
+        random_tracks=track is None,
         num_gates=num_gates,
+        layout_difficulty=difficulty if track is None else None,
         randomization=cfg.randomization,
         reward=cfg.reward_config(),
         observation=cfg.observation,
@@ -61,13 +80,22 @@ def make_train_env(cfg: TrainConfig, num_envs: int, num_gates: int, seed: int):
     venv = BatchedRacingVecEnv(num_envs, env_cfg)
     venv.seed(seed)
     if cfg.perception.enabled:
-        venv = PerceptionNoiseVecEnv(venv, ErrorModel.from_config(cfg.perception), seed=seed + 7919)
+        camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
+        model = ErrorModel.from_config(cfg.perception)
+        venv = PerceptionNoiseVecEnv(venv, model, seed=seed + 7919, camera=camera)
     return FeatureVecEnv(venv)
 
 
-def evaluate_model(model, cfg: TrainConfig, num_gates: int, episodes: int, seed: int) -> float:
-    """Success rate of the deterministic policy over ``episodes`` random tracks (one per drone)."""
-    env = make_train_env(cfg, episodes, num_gates, seed)
+def evaluate_model(
+    model,
+    cfg: TrainConfig,
+    num_gates: int,
+    episodes: int,
+    seed: int,
+    difficulty: float | None = None,
+) -> float:
+    """Success rate of the deterministic policy over ``episodes`` tracks (one per drone)."""
+    env = make_train_env(cfg, episodes, num_gates, seed, difficulty)
     obs = env.reset()
     result: list[bool | None] = [None] * episodes
     while any(r is None for r in result):
@@ -130,8 +158,14 @@ def train_policy(
     torch.set_num_threads(cfg.ppo.torch_threads)
 
     p = cfg.ppo
+    stages = curriculum_of(cfg)
     stage = int(state["stage"])
-    env = make_train_env(cfg, p.num_envs, cfg.curriculum.stages[stage], seed)
+    if not 0 <= stage < len(stages.stages):
+        raise ValueError(
+            f"{ckpt_dir / 'last_state.json'}: curriculum stage {stage} is out of range for this config"
+        )
+    difficulty = None if stages.difficulty is None else stages.difficulty[stage]
+    env = make_train_env(cfg, p.num_envs, stages.stages[stage], seed, difficulty)
     if resume:
         try:
             model = PPO.load(ckpt_dir / "last.zip", env=env, device="cpu")
@@ -162,8 +196,10 @@ def train_policy(
         )
         with torch.no_grad():  # start from hover: mean thrust action balances gravity
             model.policy.action_net.bias[0] = QuadParams().hover_thrust_action
+        if cfg.init is not None:
+            load_init_actor(model, cfg.init, cfg.observation)
 
-    curriculum = CurriculumCallback(cfg.curriculum, stage=stage, verbose=verbose)
+    curriculum = CurriculumCallback(stages, stage=stage, verbose=verbose)
     metrics = MetricsCallback(curriculum, progress=progress)
     metrics.rows = list(state.get("metrics", []))
     metrics.wall_offset = float(state.get("wall_s", 0.0))
@@ -186,8 +222,9 @@ def train_policy(
                 self.next_eval += cfg.eval_every
                 n = curriculum.num_gates
                 rate = evaluate_model(
-                    model, cfg, n, cfg.eval_episodes, seed + 10_000 + self.num_timesteps
-                )
+                    model, cfg, n, cfg.eval_episodes, seed + 10_000 + self.num_timesteps,
+                    curriculum.difficulty,
+                )  # fmt: skip
                 self.logger.record("eval/success_rate", rate)
                 if (curriculum.stage, rate) > tuple(best):
                     best[:] = [curriculum.stage, rate]
@@ -204,6 +241,8 @@ def train_policy(
             return True
 
     callbacks = [curriculum, metrics, Periodic()]
+    if cfg.init is not None and cfg.init_critic_steps > 0:
+        callbacks.append(CriticWarmup(cfg.init_critic_steps))
     if p.advantage_norm == "running":
         callbacks.append(RunningAdvantageNorm())
     remaining = max(total - int(model.num_timesteps), 0) if resume else total

@@ -26,13 +26,21 @@ def _coloured_line(ax, x, y, c, vmax):
 
 
 def plot_trajectory(
-    path: str | os.PathLike, track: Track, t, pos, speed, crash_point=None, title: str = ""
+    path: str | os.PathLike,
+    track: Track,
+    t,
+    pos,
+    speed,
+    crash_point=None,
+    title: str = "",
+    ghost: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> None:
     """Write a PNG: top view (x, y) and altitude against time, path coloured by speed.
 
     Args:
         t: (T,) s; pos: (T, 3) world positions; speed: (T,) m/s.
         crash_point: (3,) where the drone crashed, marked with a red cross, or None.
+        ghost: the time-optimal plan as (t (M,) s, pos (M, 3)), drawn dashed, or None.
     """
     t, pos, speed = np.asarray(t), np.asarray(pos), np.asarray(speed)
     vmax = max(float(speed.max()), 1e-3)
@@ -54,6 +62,12 @@ def plot_trajectory(
             arrowprops={"arrowstyle": "->", "color": "tab:orange"},
         )
         ax_top.text(c[0], c[1] + 0.4, str(i), fontsize=8, ha="center")
+    if ghost is not None:
+        gt, gp = np.asarray(ghost[0]), np.asarray(ghost[1])
+        label = f"time-optimal plan ({gt[-1]:.2f} s)"
+        ax_top.plot(gp[:, 0], gp[:, 1], "--", color="0.45", lw=1.2, label=label)
+        ax_alt.plot(gt, gp[:, 2], "--", color="0.45", lw=1.2, label=label)
+        ax_alt.legend(loc="best", fontsize=8)
     ax_top.plot(*track.start_pos[:2], "k^", label="start")
     if crash_point is not None:
         ax_top.plot(crash_point[0], crash_point[1], "rx", ms=14, mew=3, label="crash")

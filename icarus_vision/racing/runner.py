@@ -37,6 +37,16 @@ def time_optimal(track: Track, quad: QuadParams, cache_dir: str = PLAN_CACHE) ->
     return plan_time_for_race(track, quad, cache_dir)
 
 
+def planned_ghost(
+    track: Track, quad: QuadParams, cache_dir: str = PLAN_CACHE
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The cached time-optimal trajectory of (track, quad) as (t (M,) s, pos (M, 3)), or None."""
+    from icarus_vision.planning.cache import load_cached
+
+    hit = load_cached(track, quad, cache_dir)
+    return None if hit is None else (np.asarray(hit.t), np.asarray(hit.pos))
+
+
 @dataclass
 class RaceResult:
     """A flown race: the report plus the trajectory for plots and the video frames.
@@ -46,6 +56,7 @@ class RaceResult:
         t: (T,) time, s; pos: (T, 3) world positions; speed: (T,) m/s.
         track: the track as flown (after randomisation).
         video: list of RGB frames at the camera rate (empty unless asked for).
+        ghost: the cached time-optimal plan as (t (M,) s, pos (M, 3)), or None.
     """
 
     report: dict
@@ -54,6 +65,7 @@ class RaceResult:
     speed: np.ndarray
     track: Track
     video: list
+    ghost: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def _pilot(policy: ExportedPolicy | str, quad: QuadParams):
@@ -70,7 +82,7 @@ def run_race(
     laps: int | None = None,
     seed: int = 0,
     detector: str = "cnn",
-    policy: str | None = "default",
+    policy: str | None = "auto",
     backend: str = "pybullet",
     randomize: bool = False,
     latency_frames: int = 1,
@@ -80,7 +92,8 @@ def run_race(
 
     Args:
         detector: ``cnn[:PATH]``, ``opencv`` or ``oracle`` (true gate position, no camera).
-        policy: ``default`` (the shipped policy), a path to an exported policy, or ``scripted``.
+        policy: ``auto`` (the track's shipped specialist, else the generalist), ``default`` (the
+            generalist), a shipped name, a path to an exported policy, or ``scripted``.
         backend: physics backend; the camera renders through PyBullet either way.
         randomize: mass, thrust, wind and gate jitter from the training ranges.
         latency_frames: camera frames between an image and its detections reaching the estimator.
@@ -99,7 +112,8 @@ def run_race(
     if laps is not None:
         base = base.with_laps(laps)
     quad = quad or QuadParams()
-    pilot_spec = resolve_policy(policy)
+    pilot_spec = resolve_policy(policy, track=base)
+    ghost = planned_ghost(base, quad)
     obs_mode = pilot_spec.observation if isinstance(pilot_spec, ExportedPolicy) else "basic"
     cfg = EnvConfig(
         track=base,
@@ -124,7 +138,7 @@ def run_race(
         if video:
             from icarus_vision.racing.video import VideoComposer
 
-            composer = VideoComposer(flown, camera, scene)
+            composer = VideoComposer(flown, camera, scene, ghost, 1.0 / quad.camera.rate_hz)
 
             def on_frame(rgb, dets, est, state):
                 frames.append(composer.compose(rgb, dets, est, state))
@@ -150,8 +164,6 @@ def run_race(
         },
     }
     policy_name = pilot_spec.name if isinstance(pilot_spec, ExportedPolicy) else "scripted"
-    if isinstance(pilot_spec, ExportedPolicy) and policy in (None, "default"):
-        policy_name = "default"
     report = {
         "track": base.name, "laps": base.laps, "seed": seed, "quad": quad.name,
         "detector": det_name, "policy": policy_name, "backend": backend,
@@ -174,4 +186,4 @@ def run_race(
     validate_report(report)
     pos = np.array([np.asarray(flown.start_pos), *rec.pos])
     t = np.array([0.0, *rec.t])
-    return RaceResult(report, t, pos, speeds, flown, frames)
+    return RaceResult(report, t, pos, speeds, flown, frames, ghost)

@@ -22,12 +22,29 @@ CORNER_COLORS = [
 ]  # TL, TR, BR, BL (RGB)
 
 
-class VideoComposer:
-    """Draws one video frame per camera frame. Frames are RGB uint8 (H, W, 3)."""
+GHOST_COLOR = (150, 150, 150)
 
-    def __init__(self, track: Track, camera: Camera, scene) -> None:
+
+class VideoComposer:
+    """Draws one video frame per camera frame. Frames are RGB uint8 (H, W, 3).
+
+    With ``ghost`` (the time-optimal plan as (t (M,), pos (M, 3))), the top view also shows the
+    planned path and, as a grey ring, where the plan is at the same moment of the race.
+    """
+
+    def __init__(
+        self,
+        track: Track,
+        camera: Camera,
+        scene,
+        ghost: tuple[np.ndarray, np.ndarray] | None = None,
+        frame_dt: float = 1 / 30,
+    ) -> None:
         self.track, self.camera, self.scene = track, camera, scene
+        self.ghost, self.frame_dt, self.frames = ghost, frame_dt, 0
         pts = np.array([track.start_pos, *(g.pos for g in track.gates)])[:, :2]
+        if ghost is not None:
+            pts = np.concatenate((pts, np.asarray(ghost[1])[:, :2]))
         lo, hi = pts.min(axis=0) - 3.0, pts.max(axis=0) + 3.0
         self.scale = (TOP_SIZE - 20) / float(max(hi - lo))
         self.lo = lo
@@ -41,6 +58,9 @@ class VideoComposer:
 
     def _draw_track(self) -> np.ndarray:
         img = np.full((TOP_SIZE, TOP_SIZE, 3), 245, np.uint8)
+        if self.ghost is not None:
+            path = np.array([self._px(p[:2]) for p in np.asarray(self.ghost[1])], np.int32)
+            cv2.polylines(img, [path], False, GHOST_COLOR, 1, cv2.LINE_AA)
         for i, g in enumerate(self.track.gates):
             c = np.asarray(g.pos)
             half = (g.size / 2 + g.frame_width) * np.array([-np.sin(g.yaw), np.cos(g.yaw)])
@@ -87,6 +107,12 @@ class VideoComposer:
             cv2.polylines(
                 top, [np.array(self.trail, np.int32)], False, (30, 90, 200), 2, cv2.LINE_AA
             )
+        if self.ghost is not None:
+            t_plan, p_plan = np.asarray(self.ghost[0]), np.asarray(self.ghost[1])
+            now = min(self.frames * self.frame_dt, float(t_plan[-1]))
+            at = [np.interp(now, t_plan, p_plan[:, k]) for k in range(2)]
+            cv2.circle(top, self._px(at), 7, GHOST_COLOR, 2, cv2.LINE_AA)
+        self.frames += 1
         cv2.circle(top, self.trail[-1], 6, (200, 30, 30), -1, cv2.LINE_AA)
         speed = float(np.linalg.norm(state.vel[0]))
         cv2.putText(

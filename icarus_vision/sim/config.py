@@ -24,6 +24,35 @@ class RewardConfig:
     """Per m/s of velocity toward the next gate, every step (0 in the progress preset)."""
     time: float = 0.0
     """Per second of flight (a negative value is a time penalty; 0 in the progress preset)."""
+    line: float = 0.0
+    """Per metre flown along the racing line: the segment from the previous gate (or the start) to
+    the next gate (Song et al. 2021); where that segment is shorter than 1 m (a gate flown straight
+    back), toward the gate instead."""
+    perception: float = 0.0
+    """Per radian, every step, that the next gate lies outside a cone of ``perception_cone_deg``
+    around the camera's optical axis (a negative value keeps the gate in view)."""
+    perception_cone_deg: float = 30.0
+    """Half-angle of the cone around the optical axis that costs nothing, degrees."""
+    rates: float = 0.0
+    """Per rad/s of body-rate magnitude, every step (a negative value is a smoothness cost)."""
+    action_change: float = 0.0
+    """Per unit of squared change of the action since the previous step."""
+
+
+PROGRESS_REWARD = RewardConfig()
+"""The ``progress`` preset: distance gained toward the next gate, a large gate bonus."""
+RACING_LINE_REWARD = RewardConfig(
+    progress=0.0,
+    gate=5.0,
+    crash=-10.0,
+    attitude=0.0,
+    line=1.0,
+    perception=-0.05,
+    rates=-5e-4,
+    action_change=-2e-3,
+)
+"""The ``racing-line`` preset: progress along the racing line values time; small smoothness and
+perception costs; no term pays for staying anywhere."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +87,9 @@ class EnvConfig:
     """Draw a new procedural track (``random_track``) for every episode."""
     num_gates: int | None = None
     """Gates per episode: the first n of a fixed track, or n random gates (None: all / 10)."""
+    layout_difficulty: float | None = None
+    """Random tracks only: None draws the classic ``random_track`` layouts; a value in [0, 1]
+    draws ``race_track`` layouts of that difficulty (1: the full ranges and motifs)."""
     quad: QuadParams = field(default_factory=QuadParams)
     """The quadrotor."""
     ctrl_hz: float = 50.0
@@ -89,6 +121,10 @@ class EnvConfig:
             )
         if self.observation not in ("basic", "extended"):
             raise ValueError(f"observation must be 'basic' or 'extended', got {self.observation!r}")
+        if self.layout_difficulty is not None and not 0.0 <= self.layout_difficulty <= 1.0:
+            raise ValueError(
+                f"layout_difficulty must be in [0, 1] or None, got {self.layout_difficulty}"
+            )
         if self.num_gates is not None and self.num_gates < 1:
             raise ValueError(f"num_gates must be >= 1, got {self.num_gates}")
 

@@ -101,7 +101,7 @@ class DroneRacingEnv(gym.Env):
         p0 = self.state.pos.copy()
         trail, frame_hit, ground_hit = self._backend_step(thrust_cmd, rate_cmd, self.core.wind())
         reward, term, trunc, crash, terms = self.core.finish_step(
-            p0, self.state, frame_hit, ground_hit, trail
+            p0, self.state, frame_hit, ground_hit, trail, action=a
         )
         info = self.core.info(0, terms, int(crash[0]))
         self._needs_reset = bool(term[0] or trunc[0])
@@ -112,6 +112,10 @@ class DroneRacingEnv(gym.Env):
     def set_num_gates(self, n: int) -> None:
         """Gates per episode from the next reset on (curriculum hook, reachable via env_method)."""
         self.core.set_num_gates(n)
+
+    def set_difficulty(self, difficulty: float | None) -> None:
+        """Race-layout difficulty of random tracks from the next reset on (None: classic layouts)."""
+        self.core.set_difficulty(difficulty)
 
     @property
     def track(self) -> Track:

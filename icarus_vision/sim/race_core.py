@@ -15,11 +15,23 @@ from icarus_vision.sim import rules
 from icarus_vision.sim.action import validate_action
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
-from icarus_vision.sim.dynamics import QuadBatchParams, QuadState, quat_to_rpy, rpy_to_quat
+from icarus_vision.sim.dynamics import (
+    QuadBatchParams,
+    QuadState,
+    quat_to_rot,
+    quat_to_rpy,
+    rpy_to_quat,
+)
 from icarus_vision.sim.observation import OBS_DIM, observation_vector
+from icarus_vision.sim.race_layouts import race_track
 from icarus_vision.sim.random_track import random_track
 from icarus_vision.sim.randomization import jitter_track, sample_wind
-from icarus_vision.sim.reward import compute_reward
+from icarus_vision.sim.reward import (
+    camera_gate_angle,
+    compute_reward,
+    cost_action_change,
+    reward_line,
+)
 from icarus_vision.sim.track import Track
 
 TAKEOFF_CLEARANCE = 0.1  # m above the ground (sphere bottom) that counts as airborne
@@ -38,6 +50,7 @@ class RaceCore:
         self.n = n
         self.base_track = None if cfg.random_tracks else resolve_track(cfg.track)
         self.num_gates = cfg.num_gates
+        self.difficulty = cfg.layout_difficulty
         self.rngs = [np.random.default_rng() for _ in range(n)]
         self.tracks: list[Track] = [None] * n  # type: ignore[list-item]
         self.params = QuadBatchParams.from_quad(cfg.quad, n)
@@ -57,6 +70,9 @@ class RaceCore:
         self.ep_terms: dict[str, np.ndarray] = {}  # per-term episode sums
         self.ep_len = np.zeros(n, dtype=np.int64)
         self.lap_times: list[list[float]] = [[] for _ in range(n)]
+        self.start_pos = np.zeros((n, 3))
+        self.ep_difficulty = np.full(n, np.nan)  # layout difficulty of each drone's episode
+        self.prev_action = np.full((n, 4), np.nan)
 
     # -- track arrays ------------------------------------------------------------------------
     def _capacity(self) -> int:
@@ -98,9 +114,22 @@ class RaceCore:
             for k in ("n_pass", "bounds_lo", "bounds_hi"):
                 setattr(self, k, old[k])
 
+    def set_difficulty(self, difficulty: float | None) -> None:
+        """Race-layout difficulty of random tracks from the next reset on (curriculum hook).
+
+        None draws the classic ``random_track`` layouts; a value in [0, 1] draws ``race_track``.
+        """
+        if difficulty is not None and not 0.0 <= difficulty <= 1.0:
+            raise ValueError(f"layout difficulty must be in [0, 1] or None, got {difficulty}")
+        self.difficulty = difficulty
+
     def _episode_track(self, rng: np.random.Generator) -> Track:
         if self.base_track is None:
-            track = random_track(self.num_gates or RANDOM_TRACK_GATES, rng)
+            n_gates = self.num_gates or RANDOM_TRACK_GATES
+            if self.difficulty is None:
+                track = random_track(n_gates, rng)
+            else:
+                track = race_track(n_gates, rng, difficulty=self.difficulty)
         else:
             track = self.base_track
             if self.num_gates is not None and self.num_gates < len(track.gates):
@@ -131,6 +160,8 @@ class RaceCore:
             rng = self.rngs[i]
             track = self._episode_track(rng)
             self.tracks[i] = track
+            random_layout = self.base_track is None and self.difficulty is not None
+            self.ep_difficulty[i] = self.difficulty if random_layout else np.nan
             passages = track.passages
             m = len(passages)
             self.g_mask[i] = False
@@ -157,11 +188,13 @@ class RaceCore:
                     start[:2] += rng.uniform(-r.start_pos_jitter_m, r.start_pos_jitter_m, 2)
             self.params.mass[i], self.params.thrust_max[i] = mass, thrust_max
             state.pos[k] = start
+            self.start_pos[i] = start
             start_yaw[k] = math.radians(track.start_yaw_deg)
             self.max_t[i] = cfg.max_episode_s if cfg.max_episode_s is not None else 5.0 + 3.0 * m
             self.lap_times[i] = []
         state.quat[:] = rpy_to_quat(np.stack((0 * start_yaw, 0 * start_yaw, start_yaw), axis=1))
         self.target[idx] = 0
+        self.prev_action[idx] = np.nan
         self.t[idx] = 0.0
         self.taken_off[idx] = False
         self.lap_start[idx] = 0.0
@@ -212,6 +245,7 @@ class RaceCore:
         frame_hit: np.ndarray,
         ground_hit: np.ndarray,
         trail: np.ndarray | None = None,
+        action: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
         """Apply the rules after the physics of one control step.
 
@@ -220,6 +254,7 @@ class RaceCore:
             state: states after the step.
             frame_hit, ground_hit: (N,) bool collisions reported by the backend.
             trail: (S, N, 3) sub-step positions for the bounds check (None: end position only).
+            action: (N, 4) the action of this step (for the action-change cost; None: no cost).
 
         Returns:
             reward (N,), terminated (N,), truncated (N,), crash_code (N,) int (-1 none, else index in
@@ -240,9 +275,24 @@ class RaceCore:
         crashed = crash_code >= 0
         self.taken_off |= state.pos[:, 2] >= self.params.radius + TAKEOFF_CLEARANCE
         rpy = self.last_rpy = quat_to_rpy(state.quat)
+        w = cfg.reward
+        extra = {}
+        if w.line:
+            rows, j = np.arange(self.n), np.minimum(self.target, self.n_pass - 1)
+            seg_from = np.where((j > 0)[:, None], self.g_pos[rows, j - 1], self.start_pos)
+            extra["line"] = reward_line(p0, state.pos, seg_from, gpos)
+        if w.perception:
+            uptilt = np.radians(cfg.quad.camera.uptilt_deg)
+            extra["camera_angle"] = camera_gate_angle(quat_to_rot(state.quat), to_gate, uptilt)
+        if w.rates:
+            extra["omega"] = state.omega
+        if w.action_change:
+            a = self.prev_action if action is None else action
+            extra["action_change"] = cost_action_change(a, self.prev_action)
+            self.prev_action[:] = a
         reward, terms = compute_reward(
-            cfg.reward, prev_dist=prev_dist, dist=dist, passed=passed, crashed=crashed,
-            rpy=rpy, vel=state.vel, to_gate=to_gate, dt=dt,
+            w, prev_dist=prev_dist, dist=dist, passed=passed, crashed=crashed,
+            rpy=rpy, vel=state.vel, to_gate=to_gate, dt=dt, **extra,
         )  # fmt: skip
         self.t += dt
         self.target += passed
@@ -288,6 +338,7 @@ class RaceCore:
             "lap_time": None if np.isnan(self.last_lap_time[i]) else float(self.last_lap_time[i]),
             "lap_times": list(self.lap_times[i]),
             "time": float(self.t[i]),
+            "difficulty": None if np.isnan(self.ep_difficulty[i]) else float(self.ep_difficulty[i]),
             "reward_terms": {k: float(v[i]) for k, v in terms.items()},
             "episode_reward_terms": {k: float(v[i]) for k, v in self.ep_terms.items()},
         }

@@ -37,6 +37,58 @@ def reward_speed(vel: np.ndarray, to_gate: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", vel, to_gate / np.maximum(n, 1e-6))
 
 
+def reward_line(
+    p0: np.ndarray, p1: np.ndarray, seg_from: np.ndarray, gate: np.ndarray
+) -> np.ndarray:
+    """(N,) metres flown along the racing line this step.
+
+    Args:
+        p0, p1: (N, 3) positions before and after the step.
+        seg_from: (N, 3) start of each drone's segment: the previous gate, or the start position.
+        gate: (N, 3) the target gate's centre, the segment's end.
+
+    The line is the segment's direction; where the segment is shorter than 1 m (a gate flown
+    straight back), the direction from p0 to the gate.
+    """
+    seg = gate - seg_from
+    length = np.linalg.norm(seg, axis=1, keepdims=True)
+    to_gate = gate - p0
+    direction = np.where(length >= 1.0, seg, to_gate)
+    direction = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-9)
+    return np.einsum("ij,ij->i", p1 - p0, direction)
+
+
+def camera_gate_angle(rot: np.ndarray, to_gate: np.ndarray, uptilt_rad: float) -> np.ndarray:
+    """(N,) angle between the camera's optical axis and the direction to the gate, radians.
+
+    Args:
+        rot: (N, 3, 3) body-to-world rotations.
+        to_gate: (N, 3) world vector from the drone to the gate.
+        uptilt_rad: camera pitch above the body's x axis.
+    """
+    axis_body = np.array([np.cos(uptilt_rad), 0.0, np.sin(uptilt_rad)])
+    axis = rot @ axis_body
+    n = np.linalg.norm(to_gate, axis=1)
+    cos = np.einsum("ij,ij->i", axis, to_gate) / np.maximum(n, 1e-9)
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def cost_perception(angle: np.ndarray, cone_rad: float) -> np.ndarray:
+    """(N,) radians by which the gate lies outside the free cone around the optical axis."""
+    return np.maximum(angle - cone_rad, 0.0)
+
+
+def cost_rates(omega: np.ndarray) -> np.ndarray:
+    """(N,) body-rate magnitude, rad/s."""
+    return np.linalg.norm(omega, axis=1)
+
+
+def cost_action_change(action: np.ndarray, prev_action: np.ndarray) -> np.ndarray:
+    """(N,) squared change of the action; 0 where there is no previous action (NaN rows)."""
+    d = np.sum((action - prev_action) ** 2, axis=1)
+    return np.where(np.isnan(d), 0.0, d)
+
+
 def compute_reward(
     cfg: RewardConfig,
     *,
@@ -48,22 +100,40 @@ def compute_reward(
     vel: np.ndarray,
     to_gate: np.ndarray,
     dt: float,
+    line: np.ndarray | None = None,
+    camera_angle: np.ndarray | None = None,
+    omega: np.ndarray | None = None,
+    action_change: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Weighted sum of the named terms.
+
+    The optional inputs are needed only when their term's weight is non-zero: ``line`` (N,) from
+    ``reward_line``, ``camera_angle`` (N,) from ``camera_gate_angle``, ``omega`` (N, 3) body rates,
+    ``action_change`` (N,) from ``cost_action_change``.
 
     Returns:
         reward: (N,) float64.
         terms: name -> (N,) weighted contribution of each term (zero-weight terms omitted).
     """
-    terms = {
-        "progress": cfg.progress * reward_progress(prev_dist, dist),
-        "gate": cfg.gate * reward_gate(passed),
-        "crash": cfg.crash * cost_crash(crashed),
-        "attitude": cfg.attitude * cost_attitude(rpy),
-    }
+    terms = {}
+    if cfg.progress:
+        terms["progress"] = cfg.progress * reward_progress(prev_dist, dist)
+    terms["gate"] = cfg.gate * reward_gate(passed)
+    terms["crash"] = cfg.crash * cost_crash(crashed)
+    if cfg.attitude:
+        terms["attitude"] = cfg.attitude * cost_attitude(rpy)
     if cfg.speed:
         terms["speed"] = cfg.speed * reward_speed(vel, to_gate) * dt
     if cfg.time:
         terms["time"] = np.full(dist.shape, cfg.time * dt)
+    if cfg.line:
+        terms["line"] = cfg.line * line
+    if cfg.perception:
+        cone = np.radians(cfg.perception_cone_deg)
+        terms["perception"] = cfg.perception * cost_perception(camera_angle, cone)
+    if cfg.rates:
+        terms["rates"] = cfg.rates * cost_rates(omega)
+    if cfg.action_change:
+        terms["action_change"] = cfg.action_change * action_change
     total = sum(terms.values())
     return total, terms

@@ -75,7 +75,7 @@ class BatchedRacingVecEnv(VecEnv):
             core, self.state, thrust_cmd, rate_cmd, core.wind()
         )
         reward, term, trunc, crash, terms = core.finish_step(
-            p0, self.state, frame_hit, ground_hit, trail
+            p0, self.state, frame_hit, ground_hit, trail, action=self._actions
         )
         self.last_reward_terms = terms
         done = term | trunc
@@ -112,8 +112,8 @@ class BatchedRacingVecEnv(VecEnv):
     def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list:
         """Call a method for the selected drones; ``set_num_gates`` applies to the whole batch."""
         idx = list(self._get_indices(indices))
-        if method_name == "set_num_gates":
-            self.core.set_num_gates(*method_args, **method_kwargs)
+        if method_name in ("set_num_gates", "set_difficulty"):
+            getattr(self.core, method_name)(*method_args, **method_kwargs)
             return [None] * len(idx)
         fn = getattr(self, method_name)
         return [fn(*method_args, **method_kwargs) for _ in idx]
@@ -123,3 +123,7 @@ class BatchedRacingVecEnv(VecEnv):
 
     def set_num_gates(self, n: int) -> None:
         self.core.set_num_gates(n)
+
+    def set_difficulty(self, difficulty: float | None) -> None:
+        """Race-layout difficulty of random tracks from the next reset on (None: classic layouts)."""
+        self.core.set_difficulty(difficulty)

@@ -15,7 +15,7 @@ def test_classic_preset_is_the_classic_setup():
         0.2,
         0.01,
     )
-    assert set(PRESETS) == {"classic", "fast"} and FAST.ppo.num_envs >= 64
+    assert set(PRESETS) == {"classic", "fast", "racing", "specialist"} and FAST.ppo.num_envs >= 64
 
 
 def test_load_config_overrides_preset(tmp_path):
