@@ -122,6 +122,22 @@ def test_plan_command_and_race_reports_time_optimal(tmp_path, monkeypatch):
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["time_optimal_s"] == pytest.approx(summary["time_optimal_s"], abs=1e-3)
     assert report["time_optimal_ratio"] > 1.0
+    assert (tmp_path / "r" / "trajectory.png").is_file()  # drawn with the plan as a ghost
+    res = runner.invoke(
+        app, ["eval-policy", "--track", "single-gate", "--episodes", "4", "--json", "e.json"]
+    )
+    assert res.exit_code == 0, res.output
+    ev = json.loads((tmp_path / "e.json").read_text())
+    assert ev["time_optimal_s"] == pytest.approx(summary["time_optimal_s"], abs=1e-3)
+    assert ev["time_optimal_ratio"] == pytest.approx(
+        ev["lap_time_s"]["median"] / ev["time_optimal_s"], rel=1e-3
+    )
+    assert ev["time_optimal_ratio"] > 1.0
+    res = runner.invoke(
+        app, ["eval-policy", "--episodes", "2", "--gates", "2", "--json", "r2.json"]
+    )
+    random_tracks = json.loads((tmp_path / "r2.json").read_text())
+    assert random_tracks["time_optimal_s"] is None and random_tracks["time_optimal_ratio"] is None
 
 
 def test_race_refuses_a_policy_with_other_conventions(tmp_path):

@@ -1,0 +1,117 @@
+"""The racing policy's figures in the whole loop (PyBullet, camera, detector, estimator, policy).
+
+    .venv/bin/python benchmarks/race_policy.py builtin [--seeds 20] [--detector cnn] [--json PATH]
+    .venv/bin/python benchmarks/race_policy.py specialists [--seeds 20] [--json PATH]
+    .venv/bin/python benchmarks/race_policy.py vision [--tracks 60] [--difficulty 1.0] [--json PATH]
+
+``builtin``: every built-in track, `race --randomize --detector cnn --policy default` (the
+generalist) for seeds 100.., finish rate per track, median detection rate, and the median lap over
+the track's time-optimal plan where one is cached (`icarus-vision plan --track NAME`).
+``specialists``: `grand-prix` and `split-s` with `--policy auto` (their shipped specialists), seeds
+100.., randomised, with ground truth (`--detector oracle`) and with the CNN: finish rate and median
+lap / time-optimal (plans must be cached).
+``vision``: random race layouts (``race_track(10, 3000 + i, difficulty)``), randomised, flown by
+the generalist with the CNN and with the oracle: the finish rates side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+from icarus_vision.fileio import atomic_write_json
+from icarus_vision.racing.runner import run_race
+from icarus_vision.sim.builtin import BUILTIN_TRACKS
+from icarus_vision.sim.race_layouts import race_track
+
+SEED0 = 100
+
+
+def _summary(reports: list[dict]) -> dict:
+    done = [r for r in reports if r["finished"]]
+    ratios = [r["time_optimal_ratio"] for r in done if r["time_optimal_ratio"] is not None]
+    det = [
+        r["perception"]["detection_rate"]
+        for r in reports
+        if r["perception"]["detection_rate"] is not None
+    ]
+    return {
+        "races": len(reports),
+        "finish_rate": round(len(done) / len(reports), 4),
+        "median_lap_s": round(statistics.median(r["total_time_s"] for r in done), 4)
+        if done
+        else None,
+        "median_ratio": round(statistics.median(ratios), 4) if ratios else None,
+        "detection_rate_median": round(statistics.median(det), 4) if det else None,
+        "failures": [
+            (r["seed"], r["crash_reason"], r["gates_passed"]) for r in reports if not r["finished"]
+        ],
+        "policy": sorted({r["policy"] for r in reports}),
+    }
+
+
+def builtin(seeds: int, detector: str) -> dict:
+    out = {}
+    for name in BUILTIN_TRACKS:
+        reports = [run_race(name, detector=detector, policy="default", seed=s, randomize=True).report
+                   for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
+        out[name] = _summary(reports)
+        print(name, out[name], flush=True)
+    out["all_finish_rate"] = round(statistics.mean(v["finish_rate"] for v in out.values()), 4)
+    return out
+
+
+def specialists(seeds: int) -> dict:
+    out = {}
+    for name in ("grand-prix", "split-s"):
+        for det in ("oracle", "cnn"):
+            reports = [run_race(name, detector=det, policy="auto", seed=s, randomize=True).report
+                       for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
+            out[f"{name}/{det}"] = _summary(reports)
+            print(name, det, out[f"{name}/{det}"], flush=True)
+    return out
+
+
+def vision(tracks: int, difficulty: float) -> dict:
+    out = {}
+    for det in ("oracle", "cnn"):
+        reports = []
+        for i in range(tracks):
+            track = race_track(10, 3000 + i, difficulty=difficulty)
+            reports.append(
+                run_race(
+                    track, detector=det, policy="default", seed=SEED0 + i, randomize=True
+                ).report
+            )
+        out[det] = _summary(reports)
+        print(det, out[det], flush=True)
+    out["gap_points"] = round(100 * (out["oracle"]["finish_rate"] - out["cnn"]["finish_rate"]), 1)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("what", choices=["builtin", "specialists", "vision"])
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--tracks", type=int, default=60)
+    ap.add_argument("--difficulty", type=float, default=1.0)
+    ap.add_argument("--detector", default="cnn")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    if args.what == "builtin":
+        out = builtin(args.seeds, args.detector)
+    elif args.what == "specialists":
+        out = specialists(args.seeds)
+    else:
+        out = vision(args.tracks, args.difficulty)
+    out["wall_s"] = round(time.perf_counter() - t0, 1)
+    print(json.dumps(out, indent=1))
+    if args.json:
+        atomic_write_json(args.json, out)
+
+
+if __name__ == "__main__":
+    main()

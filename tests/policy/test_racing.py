@@ -1,0 +1,159 @@
+"""The racing additions: out-of-view perception, shipped-policy resolution, fine-tuning from an
+exported actor, specialists and the layout-difficulty curriculum."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from stable_baselines3 import PPO
+
+from icarus_vision.policy.callbacks import CurriculumCallback
+from icarus_vision.policy.config import (
+    SPECIALIST,
+    CurriculumConfig,
+    PPOConfig,
+    config_from_dict,
+)
+from icarus_vision.policy.export import load_init_actor, load_policy
+from icarus_vision.policy.features import obs_to_features
+from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoise, gate_in_view
+from icarus_vision.policy.pilots import (
+    auto_policy_name,
+    resolve_policy,
+    shipped_policies,
+    shipped_policy_path,
+)
+from icarus_vision.policy.train import make_train_env, train_policy
+from icarus_vision.sim.builtin import builtin_track
+from icarus_vision.sim.quad import CameraParams
+
+
+def _obs(rpy, gate):
+    obs = np.zeros((len(gate), 21), np.float32)
+    obs[:, 6:9] = rpy
+    obs[:, 12:15] = gate
+    return obs
+
+
+def test_gate_in_view_follows_the_camera():
+    cam = CameraParams()  # 90° horizontal field of view, 20° uptilt
+    gates = np.array([[5.0, 0, 0], [5.0, 4.0, 0], [-5.0, 0, 0], [5.0, 0, -4.0], [5.0, 6.0, 0]])
+    assert gate_in_view(_obs(0.0, gates), cam).tolist() == [True, True, False, False, False]
+    yawed = _obs(np.array([0.0, 0.0, np.pi / 2]), np.array([[0.0, 5.0, 0.0], [5.0, 0.0, 0.0]]))
+    assert gate_in_view(yawed, cam).tolist() == [True, False]
+
+
+def test_out_of_view_gates_are_never_seen():
+    model = ErrorModel((0.0, 30.0), (0.5, 0.5), (0.0, 0.0))  # always detected when in view
+    noise = PerceptionNoise(model, 2, seed=0, camera=CameraParams())
+    first = noise.apply(_obs(0.0, np.array([[5.0, 0, 0], [5.0, 0, 0]])), np.ones(2, bool))
+    moved = _obs(0.0, np.array([[5.0, 1.0, 0], [-5.0, 0.0, 0]]))
+    moved[:, 0:3] = [[0.0, -1.0, 0.0], [10.0, 0.0, 0.0]]  # the drones moved; the gate stayed
+    out = noise.apply(moved, np.zeros(2, bool))
+    held = out[:, 12:15] + moved[:, 0:3]  # world estimates
+    assert not np.allclose(held[0], first[0, 12:15])  # in view: a fresh measurement
+    assert held[1] == pytest.approx(first[1, 12:15], abs=1e-5)  # behind the drone: held
+
+
+def test_auto_picks_a_shipped_specialist_only_for_its_own_layout():
+    assert "default" in shipped_policies()
+    for name in ("single-gate", "ten-gates"):
+        if f"{name}-specialist" not in shipped_policies():
+            assert auto_policy_name(builtin_track(name)) == "default"
+    assert auto_policy_name(None) == "default"
+    for spec in [s for s in shipped_policies() if s.endswith("-specialist")]:
+        track = builtin_track(spec.removesuffix("-specialist"))
+        assert auto_policy_name(track) == spec
+        assert auto_policy_name(track.with_laps(3)) == spec
+        moved = replace(
+            track, gates=(replace(track.gates[0], pos=(0.0, 9.0, 2.0)), *track.gates[1:])
+        )
+        assert auto_policy_name(moved) == "default"
+        assert resolve_policy("auto", track=track).name == spec
+    assert resolve_policy("auto", track=builtin_track("single-gate")).name in shipped_policies()
+    assert resolve_policy("default").name == "default"
+
+
+def test_shipped_policies_load_without_pickles():
+    for name in shipped_policies():
+        path = shipped_policy_path(name)
+        assert path.read_bytes()[:8] != b"\x80\x04\x95"  # not a pickle
+        json.loads(path.with_suffix(".json").read_text())
+        pol = load_policy(path)
+        assert pol.act(np.zeros(pol.obs_dim, np.float32)).shape == (4,)
+
+
+def test_init_copies_the_exported_actor_and_refuses_mismatches():
+    cfg = replace(SPECIALIST, ppo=replace(SPECIALIST.ppo, num_envs=4, batch_size=64))
+    env = make_train_env(cfg, 4, 3, seed=0)
+    model = PPO(
+        "MlpPolicy",
+        env,
+        policy_kwargs={"net_arch": [64, 64]},
+        device="cpu",
+        n_steps=8,
+        batch_size=32,
+    )
+    policy = load_init_actor(model, "default", "extended")
+    obs = np.random.default_rng(0).normal(size=(16, 21)).astype(np.float32)
+    mean, _ = model.predict(obs_to_features(obs), deterministic=True)
+    assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs), abs=1e-5)
+    small = PPO(
+        "MlpPolicy", env, policy_kwargs={"net_arch": [32]}, device="cpu", n_steps=8, batch_size=32
+    )
+    with pytest.raises(ValueError, match="do not match"):
+        load_init_actor(small, "default", "extended")
+    with pytest.raises(ValueError, match="observes"):
+        load_init_actor(model, "default", "basic")
+
+
+def test_difficulty_curriculum_config_is_validated():
+    cfg = config_from_dict({"curriculum": {"stages": [3, 10], "difficulty": [0.2, 1.0]}})
+    assert cfg.difficulty(1) == 1.0
+    with pytest.raises(ValueError, match="curriculum.difficulty"):
+        config_from_dict({"curriculum": {"stages": [3, 10], "difficulty": [0.2]}})
+    with pytest.raises(ValueError, match="curriculum.difficulty"):
+        config_from_dict({"curriculum": {"stages": [3], "difficulty": [1.5]}})
+
+
+def test_curriculum_counts_only_episodes_at_the_current_difficulty():
+    cb = CurriculumCallback(
+        CurriculumConfig(stages=(3, 3), difficulty=(0.2, 0.8), window=4, min_episodes=4), verbose=0
+    )
+    cb.venv = type("V", (), {"env_method": lambda self, *a, **k: None})()
+    ok = {"gates_total": 3, "all_gates_passed": True, "crashed": False}
+    for _ in range(4):
+        cb.record({**ok, "difficulty": 0.8})  # old-stage episodes do not count
+    assert cb.stage == 0
+    promoted = [cb.record({**ok, "difficulty": 0.2}) for _ in range(4)]
+    assert promoted[-1] and cb.stage == 1 and cb.difficulty == 0.8
+
+
+def test_specialist_fine_tune_smoke(tmp_path):
+    cfg = replace(
+        SPECIALIST,
+        track="hairpin",
+        ppo=PPOConfig(
+            num_envs=32,
+            n_steps=32,
+            batch_size=512,
+            n_epochs=2,
+            net_arch=(64, 64),
+            log_std_init=-1.0,
+        ),
+        init_critic_steps=1024,
+        checkpoint_every=2048,
+        eval_every=2048,
+        eval_episodes=8,
+    )
+    result = train_policy(cfg, tmp_path / "run", seed=0, timesteps=4096, verbose=0)
+    assert result.num_gates == 3 and result.timesteps >= 4096
+    pol = load_policy(result.policy_path)
+    assert pol.observation == "extended"
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert saved["track"] == "hairpin" and saved["init"] == "default"
+    with pytest.raises(ValueError, match="out of range"):
+        config_from_dict({"init_critic_steps": -1})

@@ -1,0 +1,93 @@
+"""Reward terms on hand-made states, and the racing-line preset's shape."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from icarus_vision.sim.config import PROGRESS_REWARD, RACING_LINE_REWARD, EnvConfig
+from icarus_vision.sim.dynamics import quat_to_rot, rpy_to_quat
+from icarus_vision.sim.reward import (
+    camera_gate_angle,
+    compute_reward,
+    cost_action_change,
+    cost_perception,
+    reward_line,
+)
+from icarus_vision.sim.vec_env import BatchedRacingVecEnv
+
+
+def test_line_progress_is_the_step_along_the_segment():
+    seg_from = np.array([[0.0, 0, 2], [0, 0, 2]])
+    gate = np.array([[10.0, 0, 2], [10, 0, 2]])
+    p0 = np.array([[1.0, 0, 2], [1, 3, 2]])
+    p1 = np.array([[2.0, 0, 2], [1, 2, 2]])  # 1 m along; 1 m sideways toward the line
+    assert reward_line(p0, p1, seg_from, gate) == pytest.approx([1.0, 0.0])
+
+
+def test_line_progress_falls_back_to_the_gate_on_a_hairpin():
+    """A gate flown straight back: the segment has no length, so progress is toward the gate."""
+    gate = np.array([[5.0, 0, 2]])
+    p0, p1 = np.array([[7.0, 0, 2]]), np.array([[6.0, 0, 2]])
+    assert reward_line(p0, p1, gate.copy(), gate) == pytest.approx([1.0])
+
+
+def test_camera_angle_zero_when_the_gate_is_on_the_optical_axis():
+    uptilt = np.radians(20.0)
+    rot = quat_to_rot(rpy_to_quat(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, np.pi / 2]])))
+    on_axis = np.array([[np.cos(uptilt), 0.0, np.sin(uptilt)], [1.0, 0.0, 0.0]])
+    angle = camera_gate_angle(rot, on_axis * 5.0, uptilt)
+    assert angle[0] == pytest.approx(0.0, abs=1e-9)
+    assert angle[1] == pytest.approx(np.arccos(np.cos(uptilt) * 0.0), abs=1e-9)  # gate to the right
+    assert cost_perception(np.radians([10.0, 50.0]), np.radians(30.0)) == pytest.approx(
+        [0.0, np.radians(20.0)]
+    )
+
+
+def test_action_change_is_squared_and_free_on_the_first_step():
+    a = np.array([[0.5, 0, 0, 0], [0.5, 0, 0, 0]])
+    prev = np.array([[0.0, 0, 0, 0], [np.nan] * 4])
+    assert cost_action_change(a, prev) == pytest.approx([0.25, 0.0])
+
+
+def _terms(cfg, **over):
+    n = 1
+    base = dict(
+        prev_dist=np.array([3.0]), dist=np.array([3.0]), passed=np.zeros(n, bool),
+        crashed=np.zeros(n, bool), rpy=np.zeros((n, 3)), vel=np.zeros((n, 3)),
+        to_gate=np.array([[3.0, 0, 0]]), dt=0.02, line=np.zeros(n),
+        camera_angle=np.array([0.9]), omega=np.array([[0.0, 0, 1.0]]),
+        action_change=np.array([0.1]),
+    )  # fmt: skip
+    base.update(over)
+    return compute_reward(cfg, **base)
+
+
+def test_racing_line_preset_pays_nothing_for_hovering_near_a_gate():
+    reward, terms = _terms(RACING_LINE_REWARD)
+    assert set(terms) == {"gate", "crash", "line", "perception", "rates", "action_change"}
+    assert all(v[0] <= 0 for v in terms.values())
+    assert reward[0] < 0
+    reward, terms = _terms(RACING_LINE_REWARD, line=np.array([0.2]), camera_angle=np.array([0.1]))
+    assert terms["line"][0] == pytest.approx(0.2) and terms["perception"][0] == 0.0
+    assert reward[0] > 0.19  # smoothness costs are small beside progress
+
+
+def test_progress_preset_terms_unchanged():
+    _, terms = _terms(PROGRESS_REWARD, dist=np.array([2.5]))
+    assert list(terms) == ["progress", "gate", "crash", "attitude"]
+    assert terms["progress"][0] == pytest.approx(0.5)
+
+
+def test_env_logs_each_racing_line_term():
+    cfg = EnvConfig(random_tracks=True, num_gates=3, reward=RACING_LINE_REWARD)
+    env = BatchedRacingVecEnv(4, cfg, info_mode="full")
+    env.seed(0)
+    env.reset()
+    _, reward, _, infos = env.step(np.tile([0.6, 0.1, 0.0, 0.0], (4, 1)))
+    terms = infos[0]["reward_terms"]
+    assert {"line", "perception", "rates", "action_change"} <= set(terms)
+    assert terms["action_change"] == 0.0  # no previous action on the first step
+    _, reward2, _, infos = env.step(np.tile([0.2, 0.1, 0.0, 0.0], (4, 1)))
+    assert infos[0]["reward_terms"]["action_change"] == pytest.approx(-2e-3 * 0.16)
+    assert reward2[0] == pytest.approx(sum(infos[0]["reward_terms"].values()), rel=1e-5)
