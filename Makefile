@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: race test lint format bench clean
+.PHONY: race test lint format bench docs docs-media clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -25,15 +25,23 @@ test: $(STAMP)
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check icarus_vision tests benchmarks
-	$(BIN)/ruff format --check icarus_vision tests benchmarks
+	$(BIN)/ruff check icarus_vision tests benchmarks tools
+	$(BIN)/ruff format --check icarus_vision tests benchmarks tools
 
 format: $(STAMP)
-	$(BIN)/ruff format icarus_vision tests benchmarks
-	$(BIN)/ruff check --fix icarus_vision tests benchmarks
+	$(BIN)/ruff format icarus_vision tests benchmarks tools
+	$(BIN)/ruff check --fix icarus_vision tests benchmarks tools
+
+# The documentation site (mkdocs-material) into site/; the test suite builds it with --strict.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+# The README's animation (docs/race.gif): plans grand-prix, flies it with the shipped models.
+docs-media: $(STAMP)
+	$(BIN)/python tools/race_gif.py --out docs/race.gif
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/sim_throughput.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info

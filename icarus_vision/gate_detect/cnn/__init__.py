@@ -166,7 +166,7 @@ class CnnDetector(Detector):
             gate at least ``zoom.cfg.min_side_px`` across again, zoomed in, and moves it. It
             runs as the refiner does. The refiner's squareness check (``max_skew``) then takes
             the zoomed corners, the more precise ones (on val, a little more precision:
-            docs/detector-history.md).
+            docs/history/detector.md).
         rescorer: a trained fourth stage (:class:`RescoreNet`, needs ``refiner`` and ``zoom``):
             every candidate is refined and zoomed, and the rescorer's probability replaces the
             refiner's score (its own threshold, then the same overlap, squareness and frame

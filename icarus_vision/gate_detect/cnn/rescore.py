@@ -7,7 +7,7 @@ it lies. The rescorer reads those twelve numbers (:data:`FEATURES`) per candidat
 probability that the candidate, as the zoom stage leaves it, matches a labelled gate under
 eval-detector's rule (``gate_detect/metrics.py``). The detector then keeps candidates scoring at
 least ``RescoreConfig.threshold``, best first, as before. Measured on val: the same precision with
-more recall and PCK@5px (docs/detector-history.md).
+more recall and PCK@5px (docs/history/detector.md).
 
 It is trained on a detector's candidates on images none of its networks saw
 (``icarus-vision train-rescorer``), costs a few microseconds a frame and is stored as
@@ -188,7 +188,7 @@ def labels(zoomed: np.ndarray, truth: list[tuple[np.ndarray, np.ndarray, float]]
     corner distance at most max(4 px, a quarter of the gate's side)), else 0. Every labelled gate
     counts, also those eval-detector does not (under 20 px, cut by the frame's edge, with hidden
     corners): they are gates, the estimator uses the small ones, and on val a rescorer taught so
-    scored higher on the counted ones too (docs/detector-history.md)."""
+    scored higher on the counted ones too (docs/history/detector.md)."""
     y = np.zeros(len(zoomed), int)
     for corners, _, _ in truth:
         if not np.isfinite(corners).all():
