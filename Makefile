@@ -12,6 +12,8 @@ $(STAMP): pyproject.toml
 	# torch first, exactly pinned, so the local CPU build is taken before anything asks for torch.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	# Compile the detector's numba code once here, so that no race or test pays for it.
+	$(BIN)/python -m icarus_vision.racing.warmup
 	touch $(STAMP)
 
 # `make race` flies the default race with the shipped CNN detector and policy; pass options with

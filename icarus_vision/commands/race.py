@@ -83,7 +83,9 @@ def race_cmd(
         ("real-time factor", f"{r['realtime_factor']:.2f}x"),
         (
             "frames / detection rate",
-            f"{p['frames']} / {p['detection_rate']:.0%}" if p["frames"] else "-",
+            f"{p['frames']} / {p['detection_rate']:.0%}"
+            if p["detection_rate"] is not None
+            else "-",
         ),
         (
             "gate error [m] median / p95",

@@ -20,6 +20,7 @@ import numpy as np
 from icarus_vision.estimator.config import EstimatorConfig
 from icarus_vision.estimator.estimator import GateEstimator
 from icarus_vision.estimator.odometry import SimulatedOdometry
+from icarus_vision.gate_detect.base import Detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.render.camera import Camera
 from icarus_vision.sim.dynamics import quat_to_rpy
@@ -43,10 +44,10 @@ class LoopRecord:
 class Perception:
     """Camera, detector and estimator for one drone, with detection latency."""
 
-    def __init__(self, detector: str, prior: Track, camera: Camera, scene, seed: int, latency_frames: int,
+    def __init__(self, detector: str | Detector, prior: Track, camera: Camera, scene, seed: int, latency_frames: int,
                  config: EstimatorConfig | None = None) -> None:  # fmt: skip
         self.camera, self.scene = camera, scene
-        self.detector = make_detector(detector)
+        self.detector = make_detector(detector) if isinstance(detector, str) else detector
         self.estimator = GateEstimator(camera, config or EstimatorConfig(), prior)
         self.odometry = SimulatedOdometry(seed=seed + 1)
         self.pending: deque = deque()
@@ -77,7 +78,7 @@ def observation_from(od, rel_world: np.ndarray, extra: np.ndarray | None = None)
     return np.concatenate(parts).astype(np.float32)
 
 
-def fly_loop(env, pilot, obs_dim: int, *, detector: str, camera: Camera, scene, seed: int,
+def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Camera, scene, seed: int,
              prior: Track, latency_frames: int = 1, on_frame=None,
              estimator: EstimatorConfig | None = None) -> LoopRecord:  # fmt: skip
     """Fly one episode of a single-drone env (already reset) with perception in the loop.
@@ -89,12 +90,12 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str, camera: Camera, scene, 
             estimator's map, which vision keeps corrected).
         prior: the estimator's map of the track (the nominal layout: with randomisation the real
             gates are displaced from it and vision must correct them).
+        detector: a detector spec (``cnn[:PATH]``, ``opencv``, ``oracle``) or a built Detector.
         on_frame: ``f(rgb, detections, estimate, state)`` called at each camera frame (video).
         estimator: estimator configuration (noise model of the detector, filter gates).
     """
     core = env.unwrapped.core
-    name, _ = parse_spec(detector)
-    oracle = name == "oracle"
+    oracle = isinstance(detector, str) and parse_spec(detector)[0] == "oracle"
     per = (
         None
         if oracle

@@ -19,6 +19,9 @@ def test_race_single_gate_oracle_report_has_every_field(backend):
     assert r["lap_times_s"] and r["total_time_s"] == r["lap_times_s"][0]
     assert r["detector"] == "oracle" and r["policy"] == "scripted" and r["backend"] == backend
     assert r["realtime_factor"] > 1 and r["perception"]["frames"] > 0
+    # the oracle sees the true gate: no detection rate or estimation error to report
+    assert r["perception"]["detection_rate"] is None
+    assert r["perception"]["rel_gate_error_m"] == {"median": None, "p95": None}
     json.dumps(r, allow_nan=False)  # standard JSON, nulls where nothing applies
     assert res.pos.shape == (len(res.t), 3)
 
