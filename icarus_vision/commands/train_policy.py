@@ -45,7 +45,10 @@ def train_policy_cmd(
     out: Path = typer.Option(None, help="Run folder (default: runs/policy-<timestamp>/)."),
     seed: int = typer.Option(0, help="Random seed."),
     resume: bool = typer.Option(
-        False, "--resume", help="Continue the run in --out from its last checkpoint."
+        False,
+        "--resume",
+        help="Continue the run in --out from its last checkpoint, with the run's own config "
+        "(a different --config is refused).",
     ),
     error_model: Path = typer.Option(None, help="Detector error model JSON for perception noise."),
     max_minutes: float = typer.Option(
@@ -53,10 +56,13 @@ def train_policy_cmd(
     ),
 ) -> None:
     """Train a racing policy with PPO (progress bar, TensorBoard logs under OUT/tb, Ctrl-C saves)."""
-    from icarus_vision.policy.config import PRESETS, load_train_config
+    from icarus_vision.policy.config import PRESETS, load_run_config, load_train_config
     from icarus_vision.policy.train import train_policy
 
-    if config is not None:
+    explicit = any(v is not None for v in (config, preset, track, init, error_model))
+    if resume and out is not None and not explicit:
+        cfg = load_run_config(out)  # the run's own settings
+    elif config is not None:
         cfg = load_train_config(config)
     else:
         if preset is not None and preset not in PRESETS:

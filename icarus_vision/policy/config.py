@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import types
+import typing
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 
@@ -187,6 +189,17 @@ def validate_train_config(c: TrainConfig) -> None:
         ("eval_every", c.eval_every >= 1),
         ("eval_episodes", c.eval_episodes >= 1),
         ("init_critic_steps", c.init_critic_steps >= 0),
+        ("randomization.mass_pct", 0 <= c.randomization.mass_pct < 1),
+        ("randomization.thrust_pct", 0 <= c.randomization.thrust_pct < 1),
+        ("randomization.wind_mps", c.randomization.wind_mps >= 0),
+        ("randomization.gust_mps", c.randomization.gust_mps >= 0),
+        ("randomization.gate_pos_jitter_m", c.randomization.gate_pos_jitter_m >= 0),
+        ("randomization.gate_yaw_jitter_deg", 0 <= c.randomization.gate_yaw_jitter_deg <= 180),
+        ("randomization.start_pos_jitter_m", c.randomization.start_pos_jitter_m >= 0),
+        ("perception.sigma_base_m", c.perception.sigma_base_m >= 0),
+        ("perception.sigma_per_m", c.perception.sigma_per_m >= 0),
+        ("perception.miss_base", 0 <= c.perception.miss_base <= 1),
+        ("perception.miss_per_m", c.perception.miss_per_m >= 0),
         ("max_episode_s", c.max_episode_s is None or c.max_episode_s > 0),
     ]
     for name, ok in checks:
@@ -264,6 +277,46 @@ def _from_table(cls, table: dict, where: str):
     return table
 
 
+def _type_error(cls, key: str, value, where: str) -> str | None:
+    """A message if ``value`` does not fit the annotated type of ``cls.key``, else None."""
+    hint = typing.get_type_hints(cls)[key]
+    options = (
+        typing.get_args(hint)
+        if typing.get_origin(hint) in (types.UnionType, typing.Union)
+        else (hint,)
+    )
+    for opt in options:
+        if opt is type(None) and value is None:
+            return None
+        if opt is bool and isinstance(value, bool):
+            return None
+        if opt is int and isinstance(value, int) and not isinstance(value, bool):
+            return None
+        if opt is float and isinstance(value, int | float) and not isinstance(value, bool):
+            return None
+        if opt is str and isinstance(value, str):
+            return None
+        if typing.get_origin(opt) is tuple and isinstance(value, list | tuple):
+            item = typing.get_args(opt)[0]
+            if all(_type_error_item(item, v) for v in value):
+                return None
+    names = " or ".join(getattr(o, "__name__", str(o)).replace("NoneType", "none") for o in options)
+    return f"{where}: {key} must be {names}, got {value!r}"
+
+
+def _type_error_item(item, v) -> bool:
+    if isinstance(v, bool):
+        return False
+    return isinstance(v, int) if item is int else isinstance(v, int | float)
+
+
+def _check_types(cls, table: dict, where: str) -> None:
+    for key, value in table.items():
+        message = _type_error(cls, key, value, where)
+        if message:
+            raise ValueError(message)
+
+
 def config_from_dict(data: dict, source: str = "<memory>") -> TrainConfig:
     """A TrainConfig from a parsed TOML table: ``preset`` picks the base, other keys override it."""
     data = dict(_from_table(TrainConfig, data, source))
@@ -276,9 +329,11 @@ def config_from_dict(data: dict, source: str = "<memory>") -> TrainConfig:
         current = getattr(base, key)
         if is_dataclass(current):
             table = _from_table(type(current), value, f"{source} [{key}]")
+            _check_types(type(current), table, f"{source} [{key}]")
             table = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
             kwargs[key] = replace(current, **table)
         else:
+            _check_types(TrainConfig, {key: value}, source)
             kwargs[key] = value
     try:
         return replace(base, **kwargs)
@@ -295,3 +350,31 @@ def load_train_config(path: str | Path) -> TrainConfig:
 def config_to_dict(c: TrainConfig) -> dict:
     """JSON-friendly dict of a config (tuples become lists)."""
     return asdict(c)
+
+
+def config_differences(a: TrainConfig, b: TrainConfig) -> list[str]:
+    """Dotted names of the settings in which two configs differ."""
+    da, db = config_to_dict(a), config_to_dict(b)
+    out = []
+    for key in da:
+        if isinstance(da[key], dict):
+            out += [f"{key}.{k}" for k in da[key] if da[key][k] != db[key].get(k)]
+        elif da[key] != db[key]:
+            out.append(key)
+    return out
+
+
+def load_run_config(out: str | Path) -> TrainConfig:
+    """The config a run was started with (``OUT/config.json``); errors name the file."""
+    import json
+
+    path = Path(out) / "config.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: the run's config is missing; cannot resume it")
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: unreadable run config ({e})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: the run config must be a JSON object")
+    return config_from_dict(data, str(path))

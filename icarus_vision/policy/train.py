@@ -30,7 +30,13 @@ from icarus_vision.policy.callbacks import (
     RunningAdvantageNorm,
     episode_success,
 )
-from icarus_vision.policy.config import CurriculumConfig, TrainConfig, config_to_dict
+from icarus_vision.policy.config import (
+    CurriculumConfig,
+    TrainConfig,
+    config_differences,
+    config_to_dict,
+    load_run_config,
+)
 from icarus_vision.policy.export import export_sb3_policy, load_init_actor
 from icarus_vision.policy.features import FeatureVecEnv
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
@@ -143,12 +149,25 @@ def train_policy(
         last = ckpt_dir / "last.zip"
         if not last.is_file():
             raise FileNotFoundError(f"{last}: no checkpoint to resume from")
+        state_path = ckpt_dir / "last_state.json"
         try:
-            state = json.loads((ckpt_dir / "last_state.json").read_text())
+            state = json.loads(state_path.read_text())
         except (OSError, json.JSONDecodeError) as e:
-            raise ValueError(
-                f"{ckpt_dir / 'last_state.json'}: corrupt checkpoint state ({e})"
-            ) from None
+            raise ValueError(f"{state_path}: corrupt checkpoint state ({e})") from None
+        if (
+            not isinstance(state, dict)
+            or not isinstance(state.get("stage"), int)
+            or not (isinstance(state.get("best"), list) and len(state["best"]) == 2)
+        ):
+            raise ValueError(f"{state_path}: corrupt checkpoint state (no stage or best entry)")
+        if (out / "config.json").is_file():
+            differ = config_differences(load_run_config(out), cfg)
+            if differ:
+                raise ValueError(
+                    f"{out} was trained with another config (differs in {', '.join(differ)}); "
+                    "resume it with its own config (leave out --config and the other settings) "
+                    "or choose another --out"
+                )
     elif ckpt_dir.exists() and any(ckpt_dir.iterdir()):
         raise ValueError(
             f"{out}: holds a previous run; pass --resume to continue it or choose another --out"

@@ -130,3 +130,61 @@ def test_cli_train_policy_stops_at_max_minutes(tmp_path):
     state = json.loads((out / "checkpoints" / "last_state.json").read_text())
     assert 0 < state["timesteps"] < 1_000_000 and 1.5 <= state["wall_s"] < 30
     assert (out / "policy.safetensors").is_file()
+
+
+def test_resume_refuses_another_config_and_bad_state(tmp_path):
+    out = tmp_path / "run"
+    train_policy(TINY, out, seed=1, timesteps=4096, verbose=0)
+    other = replace(TINY, ppo=replace(TINY.ppo, learning_rate=5e-4))
+    before = (out / "config.json").read_text()
+    with pytest.raises(ValueError, match=r"another config \(differs in ppo.learning_rate\)"):
+        train_policy(other, out, seed=1, resume=True, timesteps=8192, verbose=0)
+    assert (out / "config.json").read_text() == before  # nothing overwritten
+    state_path = out / "checkpoints" / "last_state.json"
+    for bad in ("{}", '{"stage": 7, "best": [0, 0.5]}', "[]"):
+        state_path.write_text(bad)
+        with pytest.raises(ValueError, match="checkpoint state|out of range"):
+            train_policy(TINY, out, seed=1, resume=True, timesteps=8192, verbose=0)
+
+
+def test_cli_resume_uses_the_runs_own_config(tmp_path):
+    from typer.testing import CliRunner
+
+    from icarus_vision.cli import app
+
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(
+        "total_timesteps = 4096\ncheckpoint_every = 4096\neval_every = 100000\n"
+        "[ppo]\nnum_envs = 32\nn_steps = 64\nbatch_size = 1024\nn_epochs = 2\n"
+        "[curriculum]\nstages = [1]\n"
+    )
+    out = tmp_path / "run"
+    runner = CliRunner()
+    res = runner.invoke(app, ["train-policy", "--config", str(cfg), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["train-policy", "--resume", "--out", str(out), "--timesteps", "6144"])
+    assert res.exit_code == 0, res.output  # no --config: the run's own
+    res = runner.invoke(app, ["train-policy", "--resume", "--out", str(out), "--preset", "classic"])
+    assert res.exit_code == 1 and "another config" in res.output
+
+
+@pytest.mark.parametrize(
+    "table, match",
+    [
+        ({"randomization": {"mass_pct": 5}}, "mass_pct"),
+        ({"randomization": {"wind_mps": -1.0}}, "wind_mps"),
+        ({"perception": {"sigma_base_m": -0.1}}, "sigma_base_m"),
+        ({"perception": {"miss_base": 3}}, "miss_base"),
+        ({"total_timesteps": 1.5}, "total_timesteps must be int"),
+        ({"max_episode_s": -2.0}, "max_episode_s"),
+        ({"ppo": {"learning_rate": "fast"}}, "learning_rate must be float"),
+        ({"ppo": {"net_arch": [64, "x"]}}, "net_arch"),
+        ({"curriculum": {"stages": 5}}, "stages"),
+        ({"reward": 3}, "reward must be str"),
+    ],
+)
+def test_config_values_of_the_wrong_type_or_range_are_refused(table, match):
+    from icarus_vision.policy.config import config_from_dict
+
+    with pytest.raises(ValueError, match=match):
+        config_from_dict(table, "x.toml")
