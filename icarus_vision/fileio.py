@@ -80,3 +80,29 @@ def read_toml(path: str | os.PathLike, what: str, error: type[Exception] = Value
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         cls = ValueError if error is FileNotFoundError else error
         raise cls(f"{path}: not a valid TOML file ({e})") from None
+
+
+def check_output(path: str | os.PathLike | None, *, folder: bool = False) -> None:
+    """Refuse, before any work starts, an output path that cannot be written.
+
+    Args:
+        path: a file to be written (``folder=False``) or a folder to be created; None is allowed.
+
+    Raises:
+        ValueError: the path (or, for a file, its folder) lies under an existing file, or is an
+            existing folder where a file is expected (or the reverse), naming the path.
+    """
+    if path is None:
+        return
+    p = Path(path)
+    if folder and p.exists() and not p.is_dir():
+        raise ValueError(f"{p}: exists and is not a folder")
+    if not folder and p.is_dir():
+        raise ValueError(f"{p}: is a folder, expected a file path")
+    for parent in p.parents if not folder else (p, *p.parents):
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"{p}: cannot be written, {parent} is a file")
+            if not os.access(parent, os.W_OK):
+                raise ValueError(f"{p}: cannot be written, {parent} is not writable")
+            return

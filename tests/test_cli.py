@@ -163,3 +163,43 @@ def test_train_refiner_margin_must_leave_an_opening(tmp_path):
                               str(tmp_path / "o"), "--patch", "32", "--margin", "16"])  # fmt: skip
     assert res.exit_code == 2 and "less than half the patch (32 px)" in res.output
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        [
+            "race",
+            "--track",
+            "single-gate",
+            "--detector",
+            "oracle",
+            "--policy",
+            "scripted",
+            "--out",
+            "{f}/sub",
+        ],
+        [
+            "race",
+            "--track",
+            "single-gate",
+            "--detector",
+            "oracle",
+            "--policy",
+            "scripted",
+            "--json",
+            "{f}/x.json",
+        ],
+        ["eval-policy", "--episodes", "1", "--json", "{f}/x.json"],
+        ["plan", "--track", "single-gate", "--json", "{f}/x.json"],
+        ["eval-estimator", "--track", "single-gate", "--detector", "oracle", "--out", "{f}/sub"],
+        ["eval-detector", "--data", "{f}", "--detector", "opencv", "--json", "{f}/x.json"],
+    ],
+)
+def test_outputs_under_a_file_are_refused_before_any_work(tmp_path, args):
+    f = tmp_path / "a-file"
+    f.write_text("keep me")
+    res = runner.invoke(app, [a.format(f=f) for a in args])
+    assert res.exit_code != 0
+    assert "Traceback" not in res.output and "is a file" in res.output
+    assert f.read_text() == "keep me"

@@ -68,10 +68,12 @@ def eval_detector_cmd(
     Also writes the detector's error model (gate-centre error and miss rate by distance) for
     `train-policy`'s perception noise.
     """
+    from icarus_vision.fileio import check_output
     from icarus_vision.gate_detect.evaluate import eval_detector
 
     if split not in SPLITS:
         raise typer.BadParameter(f"expected one of {', '.join(SPLITS)}", param_hint="--split")
+    check_output(json_path)
     with ExitStack() as stack:
         cols = (TextColumn("[bold]eval-detector"), BarColumn(), MofNCompleteColumn(),
                 TimeElapsedColumn())  # fmt: skip

@@ -43,6 +43,10 @@ def eval_estimator_cmd(
 
     config = config_for_detector(parse_spec(detector)[0], mode)
     out = out or Path("runs") / f"eval-estimator-{datetime.now():%Y%m%d-%H%M%S}"
+    from icarus_vision.fileio import check_output
+
+    check_output(json_path)
+    check_output(out, folder=True)
     report = evaluate_estimator(
         track,
         detector,

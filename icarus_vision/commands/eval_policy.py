@@ -50,11 +50,12 @@ def eval_policy_cmd(
     On a fixed track with a time-optimal plan (cached by `plan`, or solved with --plan) it also
     reports time_optimal_s and time_optimal_ratio: the median lap over the plan's minimum time.
     """
-    from icarus_vision.fileio import atomic_write_json
+    from icarus_vision.fileio import atomic_write_json, check_output
     from icarus_vision.policy.evaluate import evaluate_policy, time_optimal_fields
     from icarus_vision.policy.pilots import resolve_policy
     from icarus_vision.sim.builtin import resolve_track
 
+    check_output(json_path)
     base = None if track is None else resolve_track(track)
     pilot = resolve_policy(policy, track=base)
     r = evaluate_policy(pilot, track, episodes=episodes, num_gates=gates, backend=backend,

@@ -29,9 +29,12 @@ def plan_cmd(
     Writes the trajectory (CSV), a plot (top view, altitude, speed and thrust against time) and a
     cache that `race` reads to report how close to optimal a race was.
     """
+    from icarus_vision.fileio import check_output
     from icarus_vision.planning.command import format_summary, run_plan
     from icarus_vision.sim.builtin import resolve_track
 
+    check_output(json_path)
+    check_output(out, folder=True)
     trk = resolve_track(track)
     if laps is not None:
         trk = trk.with_laps(laps)

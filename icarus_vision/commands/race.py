@@ -47,12 +47,15 @@ def race_cmd(
     Writes OUT/report.json, OUT/trajectory.png and OUT/race.mp4 (FPV with detections beside a top
     view, real time) and prints a summary.
     """
-    from icarus_vision.fileio import atomic_write_json
+    from icarus_vision.fileio import atomic_write_json, check_output
     from icarus_vision.racing.plots import plot_trajectory
     from icarus_vision.racing.runner import run_race
     from icarus_vision.racing.video import write_video
     from icarus_vision.sim.quad import load_quad
 
+    for path in (json_path, video):
+        check_output(path)
+    check_output(out, folder=True)
     quad_params = load_quad(quad) if quad is not None else None
     want_video = not no_video
     result = run_race(track, quad=quad_params, laps=laps, seed=seed, detector=detector, policy=policy,
