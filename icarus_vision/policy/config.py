@@ -116,6 +116,9 @@ class TrainConfig:
     """"progress" (the simulation core's reward), "racing" (adds speed toward the gate and a
     time penalty) or "racing-line" (progress along the segment between gates, small smoothness
     and perception costs; ``sim.config.RACING_LINE_REWARD``)."""
+    time_cost: float = 0.0
+    """Cost per second of flight added to the reward preset's (≥ 0; e.g. 2.0 makes every second
+    cost as much as 2 m of progress), so a policy values lap time beyond the discount."""
     observation: str = "basic"
     """"basic" (15-D) or "extended" (21-D: adds the next gate's direction and the gate after)."""
     max_episode_s: float | None = None
@@ -140,10 +143,12 @@ class TrainConfig:
 
     def reward_config(self) -> RewardConfig:
         if self.reward == "progress":
-            return PROGRESS_REWARD
-        if self.reward == "racing-line":
-            return RACING_LINE_REWARD
-        return RewardConfig(speed=0.5, time=-1.0)
+            base = PROGRESS_REWARD
+        elif self.reward == "racing-line":
+            base = RACING_LINE_REWARD
+        else:
+            base = RewardConfig(speed=0.5, time=-1.0)
+        return replace(base, time=base.time - self.time_cost) if self.time_cost else base
 
     def difficulty(self, stage: int) -> float | None:
         """Race-layout difficulty at curriculum ``stage`` (None: classic layouts)."""
@@ -189,6 +194,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("eval_every", c.eval_every >= 1),
         ("eval_episodes", c.eval_episodes >= 1),
         ("init_critic_steps", c.init_critic_steps >= 0),
+        ("time_cost", c.time_cost >= 0),
         ("randomization.mass_pct", 0 <= c.randomization.mass_pct < 1),
         ("randomization.thrust_pct", 0 <= c.randomization.thrust_pct < 1),
         ("randomization.wind_mps", c.randomization.wind_mps >= 0),

@@ -5,7 +5,8 @@ Output folder layout (``out``):
     config.json                 the resolved TrainConfig
     tb/                         TensorBoard logs (SB3's, plus curriculum/* and reward terms)
     checkpoints/last.zip        resumable SB3 checkpoint (written atomically), last_state.json beside it
-    best.safetensors/.json      exported policy with the best evaluation (stage, success)
+    best.safetensors/.json      exported policy with the best evaluation (stage, then success
+                                less LAP_WEIGHT × median lap per gate)
     policy.safetensors/.json    exported final policy
     metrics.json                wall-clock curve: timesteps, stage, success rate, mean return
 
@@ -52,7 +53,7 @@ class TrainResult:
     timesteps: int
     stage: int
     num_gates: int
-    best_success: float
+    best_score: float
     policy_path: Path
 
 
@@ -92,6 +93,25 @@ def make_train_env(
     return FeatureVecEnv(venv)
 
 
+LAP_WEIGHT = 0.1
+"""Weight of the median lap per gate (s) against the success rate when choosing the best model:
+a tenth of a second per gate is worth one point of success."""
+
+
+@dataclass
+class Evaluation:
+    """A deterministic evaluation: success rate and the median time per gate of the successes."""
+
+    success: float
+    lap_per_gate_s: float | None
+
+    @property
+    def score(self) -> float:
+        """Success rate less ``LAP_WEIGHT`` × median lap per gate (1 s per gate with no success)."""
+        lap = 1.0 if self.lap_per_gate_s is None else self.lap_per_gate_s
+        return self.success - LAP_WEIGHT * lap
+
+
 def evaluate_model(
     model,
     cfg: TrainConfig,
@@ -99,18 +119,22 @@ def evaluate_model(
     episodes: int,
     seed: int,
     difficulty: float | None = None,
-) -> float:
-    """Success rate of the deterministic policy over ``episodes`` tracks (one per drone)."""
+) -> Evaluation:
+    """The deterministic policy over ``episodes`` tracks (one per drone)."""
     env = make_train_env(cfg, episodes, num_gates, seed, difficulty)
     obs = env.reset()
     result: list[bool | None] = [None] * episodes
+    per_gate: list[float] = []
     while any(r is None for r in result):
         actions, _ = model.predict(obs, deterministic=True)
         obs, _, done, infos = env.step(actions)
         for i in np.flatnonzero(done):
             if result[i] is None:
                 result[i] = episode_success(infos[i])
-    return float(np.mean(result))
+                if result[i]:
+                    per_gate.append(infos[i]["time"] / infos[i]["gates_total"])
+    lap = float(np.median(per_gate)) if per_gate else None
+    return Evaluation(float(np.mean(result)), lap)
 
 
 def _save_checkpoint(model, ckpt_dir: Path, state: dict) -> None:
@@ -240,18 +264,23 @@ def train_policy(
             if self.num_timesteps >= self.next_eval:
                 self.next_eval += cfg.eval_every
                 n = curriculum.num_gates
-                rate = evaluate_model(
+                ev = evaluate_model(
                     model, cfg, n, cfg.eval_episodes, seed + 10_000 + self.num_timesteps,
                     curriculum.difficulty,
                 )  # fmt: skip
-                self.logger.record("eval/success_rate", rate)
-                if (curriculum.stage, rate) > tuple(best):
-                    best[:] = [curriculum.stage, rate]
+                self.logger.record("eval/success_rate", ev.success)
+                self.logger.record("eval/score", ev.score)
+                if ev.lap_per_gate_s is not None:
+                    self.logger.record("eval/lap_per_gate_s", ev.lap_per_gate_s)
+                if (curriculum.stage, ev.score) > tuple(best):
+                    best[:] = [curriculum.stage, ev.score]
                     meta = {
                         "name": "best",
                         "timesteps": int(self.num_timesteps),
                         "num_gates": n,
-                        "eval_success": rate,
+                        "difficulty": curriculum.difficulty,
+                        "eval_success": ev.success,
+                        "eval_lap_per_gate_s": ev.lap_per_gate_s,
                     }
                     export_sb3_policy(model, out / "best", cfg.observation, meta)
             if self.num_timesteps >= self.next_ckpt:

@@ -157,3 +157,10 @@ def test_specialist_fine_tune_smoke(tmp_path):
     assert saved["track"] == "hairpin" and saved["init"] == "default"
     with pytest.raises(ValueError, match="out of range"):
         config_from_dict({"init_critic_steps": -1})
+
+
+def test_time_cost_adds_to_the_presets_time_weight():
+    assert replace(SPECIALIST, time_cost=2.0).reward_config().time == -2.0
+    assert replace(SPECIALIST, time_cost=0.0).reward_config() == SPECIALIST.reward_config()
+    with pytest.raises(ValueError, match="time_cost"):
+        config_from_dict({"time_cost": -1.0})
