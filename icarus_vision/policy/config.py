@@ -262,14 +262,16 @@ SPECIALIST = replace(
     RACING,
     preset="specialist",
     total_timesteps=25_000_000,
-    ppo=replace(RACING.ppo, learning_rate=3e-4),
+    ppo=replace(RACING.ppo, learning_rate=3e-4, log_std_init=-1.5),
+    time_cost=2.0,
     init="default",
     init_critic_steps=1_000_000,
     checkpoint_every=2_500_000,
     eval_every=2_500_000,
     eval_episodes=64,
 )
-"""A specialist: the shipped generalist fine-tuned on one track (set ``track``), randomisation on."""
+"""A specialist: the shipped generalist fine-tuned on one track (set ``track``), randomisation on,
+with a time cost of 2 per second so it trades safety margin for lap time on the track it knows."""
 PRESETS = {"classic": CLASSIC, "fast": FAST, "racing": RACING, "specialist": SPECIALIST}
 
 
