@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import math
-import types
-import typing
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 
@@ -15,6 +13,7 @@ from icarus_vision.sim.config import (
     RandomizationConfig,
     RewardConfig,
 )
+from icarus_vision.validation import check_table, require_table
 
 REWARD_PRESETS = ("progress", "racing", "racing-line")
 
@@ -275,59 +274,14 @@ with a time cost of 2 per second so it trades safety margin for lap time on the 
 PRESETS = {"classic": CLASSIC, "fast": FAST, "racing": RACING, "specialist": SPECIALIST}
 
 
-def _from_table(cls, table: dict, where: str):
-    if not isinstance(table, dict):
-        raise ValueError(f"{where}: expected a table")
-    known = {f.name: f for f in fields(cls)}
-    unknown = sorted(set(table) - set(known))
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(known)}")
-    return table
-
-
-def _type_error(cls, key: str, value, where: str) -> str | None:
-    """A message if ``value`` does not fit the annotated type of ``cls.key``, else None."""
-    hint = typing.get_type_hints(cls)[key]
-    options = (
-        typing.get_args(hint)
-        if typing.get_origin(hint) in (types.UnionType, typing.Union)
-        else (hint,)
-    )
-    for opt in options:
-        if opt is type(None) and value is None:
-            return None
-        if opt is bool and isinstance(value, bool):
-            return None
-        if opt is int and isinstance(value, int) and not isinstance(value, bool):
-            return None
-        if opt is float and isinstance(value, int | float) and not isinstance(value, bool):
-            return None
-        if opt is str and isinstance(value, str):
-            return None
-        if typing.get_origin(opt) is tuple and isinstance(value, list | tuple):
-            item = typing.get_args(opt)[0]
-            if all(_type_error_item(item, v) for v in value):
-                return None
-    names = " or ".join(getattr(o, "__name__", str(o)).replace("NoneType", "none") for o in options)
-    return f"{where}: {key} must be {names}, got {value!r}"
-
-
-def _type_error_item(item, v) -> bool:
-    if isinstance(v, bool):
-        return False
-    return isinstance(v, int) if item is int else isinstance(v, int | float)
-
-
-def _check_types(cls, table: dict, where: str) -> None:
-    for key, value in table.items():
-        message = _type_error(cls, key, value, where)
-        if message:
-            raise ValueError(message)
-
-
 def config_from_dict(data: dict, source: str = "<memory>") -> TrainConfig:
     """A TrainConfig from a parsed TOML table: ``preset`` picks the base, other keys override it."""
-    data = dict(_from_table(TrainConfig, data, source))
+    require_table(data, source)
+    nested = {k: v for k, v in data.items() if is_dataclass(getattr(FAST, k, None))}
+    data = {
+        **check_table(TrainConfig, {k: v for k, v in data.items() if k not in nested}, source),
+        **nested,
+    }
     preset = data.pop("preset", "fast")
     if preset not in PRESETS:
         raise ValueError(f"{source}: unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
@@ -336,12 +290,8 @@ def config_from_dict(data: dict, source: str = "<memory>") -> TrainConfig:
     for key, value in data.items():
         current = getattr(base, key)
         if is_dataclass(current):
-            table = _from_table(type(current), value, f"{source} [{key}]")
-            _check_types(type(current), table, f"{source} [{key}]")
-            table = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
-            kwargs[key] = replace(current, **table)
+            kwargs[key] = replace(current, **check_table(type(current), value, f"{source} [{key}]"))
         else:
-            _check_types(TrainConfig, {key: value}, source)
             kwargs[key] = value
     try:
         return replace(base, **kwargs)

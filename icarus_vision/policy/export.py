@@ -127,6 +127,8 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         tensors = load_safetensors(st.read_bytes())
     except Exception as e:  # noqa: BLE001 - any decoding failure is a corrupt file
         raise ValueError(f"{st}: corrupt or unreadable policy ({type(e).__name__}: {e})") from None
+    if not isinstance(desc, dict):
+        raise ValueError(f"{js}: a policy description must be a JSON object")
     if desc.get("format") != FORMAT:
         raise ValueError(f"{js}: unknown policy format {desc.get('format')!r} (expected {FORMAT})")
     if desc.get("action") != ACTION or desc.get("action_dim") != 4:
@@ -145,7 +147,12 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         raise ValueError(
             f"{js}: policy observes {desc.get('obs_dim')} entries but this run provides {expect_obs_dim}"
         )
-    n = len(desc["hidden"]) + 1
+    hidden = desc.get("hidden")
+    if not isinstance(hidden, list) or not all(
+        isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in hidden
+    ):
+        raise ValueError(f"{js}: hidden must be a list of layer widths, got {hidden!r}")
+    n = len(hidden) + 1
     try:
         weights = [(tensors[f"w{i}"], tensors[f"b{i}"]) for i in range(n)]
     except KeyError as e:

@@ -7,6 +7,7 @@ import os
 from dataclasses import asdict, dataclass, field, fields
 
 from icarus_vision.fileio import atomic_write_text, read_toml
+from icarus_vision.validation import check_table, require_table
 
 GRAVITY = 9.81
 
@@ -105,27 +106,12 @@ def validate_quad(q: QuadParams, source: str = "<memory>") -> None:
         raise QuadError(f"{source}: camera.uptilt_deg must be within ±90, got {c.uptilt_deg}")
 
 
-def _coerce(cls, table: dict, where: str) -> dict:
-    known = {f.name: f for f in fields(cls)}
-    unknown = sorted(set(table) - set(known))
-    if unknown:
-        raise QuadError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(known)}")
-    out = {}
-    for k, v in table.items():
-        if isinstance(v, list):
-            v = tuple(v)
-        out[k] = v
-    return out
-
-
 def quad_from_dict(data: dict, source: str = "<memory>") -> QuadParams:
     """Build QuadParams from a parsed TOML table; missing keys take the defaults."""
-    data = dict(data)
-    cam = data.pop("camera", {})
-    if not isinstance(cam, dict):
-        raise QuadError(f"{source}: [camera] must be a table")
-    kwargs = _coerce(QuadParams, data, source)
-    cam_kwargs = _coerce(CameraParams, cam, f"{source} [camera]")
+    data = dict(require_table(data, source, QuadError))
+    cam = require_table(data.pop("camera", {}), f"{source} [camera]", QuadError)
+    kwargs = check_table(QuadParams, data, source, QuadError)
+    cam_kwargs = check_table(CameraParams, cam, f"{source} [camera]", QuadError)
     try:
         camera = CameraParams(**cam_kwargs)
         q = QuadParams.__new__(QuadParams)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from icarus_vision.fileio import atomic_write_text, read_toml
+from icarus_vision.validation import require_list, require_table
 
 DEFAULT_GATE_SIZE = 1.0
 DEFAULT_FRAME_WIDTH = 0.1
@@ -234,20 +235,19 @@ def _check_keys(table: dict, allowed: set[str], where: str) -> None:
 
 def track_from_dict(data: dict, source: str = "<memory>") -> Track:
     """Build a Track from the parsed TOML structure of ARCHITECTURE.md."""
-    if not isinstance(data, dict):
-        raise TrackError(f"{source}: expected a TOML table")
+    require_table(data, source, TrackError)
     _check_keys(data, _TOP_KEYS, source)
     if "name" not in data:
         raise TrackError(f"{source}: missing required key 'name'")
-    if "start" not in data or "pos" not in data.get("start", {}):
+    start = require_table(data.get("start", {}), f"{source} [start]", TrackError)
+    if "pos" not in start:
         raise TrackError(f"{source}: missing required key 'start.pos'")
-    start = data["start"]
     _check_keys(start, _START_KEYS, f"{source} [start]")
-    defaults = data.get("defaults", {})
+    defaults = require_table(data.get("defaults", {}), f"{source} [defaults]", TrackError)
     _check_keys(defaults, _DEFAULT_KEYS, f"{source} [defaults]")
-    gates_raw = data.get("gates")
-    if not gates_raw:
+    if not data.get("gates"):
         raise TrackError(f"{source}: missing required [[gates]] (at least one gate)")
+    gates_raw = require_list(data["gates"], f"{source} [[gates]]", TrackError)
     gates = []
     for i, g in enumerate(gates_raw):
         where = f"{source} gate {i}"
@@ -270,13 +270,14 @@ def track_from_dict(data: dict, source: str = "<memory>") -> Track:
     bounds = data.get("bounds")
     lo = hi = None
     if bounds is not None:
+        require_table(bounds, f"{source} [bounds]", TrackError)
         _check_keys(bounds, _BOUNDS_KEYS, f"{source} [bounds]")
         if "min" not in bounds or "max" not in bounds:
             raise TrackError(f"{source} [bounds]: needs both 'min' and 'max'")
         lo = _vec3(bounds["min"], "bounds.min", f"{source} [bounds]")
         hi = _vec3(bounds["max"], "bounds.max", f"{source} [bounds]")
     laps = data.get("laps", 1)
-    if isinstance(laps, bool) or not isinstance(laps, int):
+    if isinstance(laps, bool) or not isinstance(laps, int) or laps < 1:
         raise TrackError(f"{source}: laps must be an integer >= 1, got {laps!r}")
     name = data["name"]
     if not isinstance(name, str) or not name:

@@ -28,6 +28,7 @@ from icarus_vision.policy.pilots import (
 )
 from icarus_vision.policy.train import make_train_env, train_policy
 from icarus_vision.sim.builtin import builtin_track
+from icarus_vision.sim.config import RACING_LINE_REWARD
 from icarus_vision.sim.quad import CameraParams
 
 
@@ -68,9 +69,9 @@ def test_auto_picks_a_shipped_specialist_only_for_its_own_layout():
         track = builtin_track(spec.removesuffix("-specialist"))
         assert auto_policy_name(track) == spec
         assert auto_policy_name(track.with_laps(3)) == spec
-        moved = replace(
-            track, gates=(replace(track.gates[0], pos=(0.0, 9.0, 2.0)), *track.gates[1:])
-        )
+        g0 = track.gates[0]
+        shifted = replace(g0, pos=(g0.pos[0] + 0.5, g0.pos[1], g0.pos[2]))
+        moved = replace(track, gates=(shifted, *track.gates[1:]), bounds_min=None, bounds_max=None)
         assert auto_policy_name(moved) == "default"
         assert resolve_policy("auto", track=track).name == spec
     assert resolve_policy("auto", track=builtin_track("single-gate")).name in shipped_policies()
@@ -160,7 +161,7 @@ def test_specialist_fine_tune_smoke(tmp_path):
 
 
 def test_time_cost_adds_to_the_presets_time_weight():
-    assert replace(SPECIALIST, time_cost=2.0).reward_config().time == -2.0
-    assert replace(SPECIALIST, time_cost=0.0).reward_config() == SPECIALIST.reward_config()
+    assert SPECIALIST.time_cost == 2.0 and SPECIALIST.reward_config().time == -2.0
+    assert replace(SPECIALIST, time_cost=0.0).reward_config() == RACING_LINE_REWARD
     with pytest.raises(ValueError, match="time_cost"):
         config_from_dict({"time_cost": -1.0})

@@ -116,11 +116,13 @@ def load_checkpoint(path: str | Path) -> tuple[CornerNet, DecodeConfig, dict]:
             raise FileNotFoundError(f"{f}: detector checkpoint file not found")
     try:
         meta = json.loads(cfg_path.read_text())
+        if not isinstance(meta, dict):
+            raise ValueError("expected a JSON object")
         if meta.get("format") != FORMAT:
             raise ValueError(f"format is {meta.get('format')!r}, expected {FORMAT!r}")
         model = CornerNet(ModelConfig.from_dict(meta["model"]))
         decode = DecodeConfig(**meta.get("decode", {}))
-    except (ValueError, KeyError, TypeError) as e:
+    except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise ValueError(f"{cfg_path}: not a valid detector config ({e})") from None
     _load_weights(model, w_path, "detector")
     return model.eval(), decode, meta

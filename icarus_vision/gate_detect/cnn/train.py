@@ -288,11 +288,15 @@ def save_state(
 def load_state(path: Path, opt, sched) -> tuple[int, list, tuple, dict]:
     """Restore ``opt`` and ``sched`` from :func:`save_state`'s file; returns (epochs done,
     history, (best score, best epoch, best metrics), the whole state)."""
-    st = torch.load(path, weights_only=True)
-    opt.load_state_dict(st["optimizer"])
-    sched.load_state_dict(st["scheduler"])
-    best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
-    return int(st["epoch"]), json.loads(st["history"]), best, st
+    try:
+        st = torch.load(path, weights_only=True)
+        opt.load_state_dict(st["optimizer"])
+        sched.load_state_dict(st["scheduler"])
+        best = (float(st["best_score"]), int(st["best_epoch"]), json.loads(st["best_metrics"]))
+        return int(st["epoch"]), json.loads(st["history"]), best, st
+    except Exception as e:  # noqa: BLE001 - any unreadable state is a corrupt file for the user
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(f"{path}: corrupt training state ({type(e).__name__}: {msg})") from None
 
 
 def _moving_average(model: CornerNet, decay: float) -> torch.optim.swa_utils.AveragedModel | None:
