@@ -20,6 +20,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # Markdown: a docstring's paragraphs reflow to the terminal's width instead of keeping the
+    # source's line breaks, which cut sentences in the middle on narrow or wide terminals.
+    rich_markup_mode="markdown",
 )
 console = Console()
 err_console = Console(stderr=True)
