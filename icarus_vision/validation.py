@@ -32,77 +32,89 @@ def _show(value) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _fits_number(v, kind) -> bool:
-    if isinstance(v, bool):
-        return False
-    if kind is int:
-        return isinstance(v, int)
-    return isinstance(v, int | float) and math.isfinite(v)
+def convert(hint, value, key: str, where: str, error: type[Exception] = ValueError):
+    """Check one TOML/JSON value against a field's annotated type and convert it (lists become
+    tuples); ``error`` says ``where: key: must be ...`` otherwise.
 
+    Handles str (non-empty), bool, int, float (finite), ``X | None``, fixed and variadic tuples
+    (variadic ones non-empty); a dataclass or other type is returned unchanged for its own loader.
+    """
 
-def _fits(value, hint) -> bool:
-    origin = typing.get_origin(hint)
+    def fail(msg: str) -> Exception:
+        return error(f"{where}: {key}: {msg}")
+
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
     if origin in (types.UnionType, typing.Union):
-        return any(_fits(value, h) for h in typing.get_args(hint))
-    if hint is type(None):
-        return value is None
-    if hint is bool:
-        return isinstance(value, bool)
-    if hint in (int, float):
-        return _fits_number(value, hint)
+        if value is None and type(None) in args:
+            return None
+        options = [a for a in args if a is not type(None)]
+        if len(options) == 1:
+            return convert(options[0], value, key, where, error)
+        for opt in options:
+            try:
+                return convert(opt, value, key, where, error)
+            except error:
+                continue
+        raise fail(f"must be {' or '.join(map(str, options))}, got {_show(value)}")
     if hint is str:
-        return isinstance(value, str)
+        if not isinstance(value, str) or not value:
+            raise fail(f"must be a non-empty string, got {_show(value)}")
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise fail(f"must be true or false, got {_show(value)}")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise fail(f"must be an integer, got {_show(value)}")
+        return value
+    if hint is float:
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not math.isfinite(value)
+        ):
+            raise fail(f"must be a finite number, got {_show(value)}")
+        return float(value)
     if origin is tuple:
-        args = typing.get_args(hint)
         if not isinstance(value, list | tuple):
-            return False
+            raise fail(f"must be a list, got {_show(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
-            return all(_fits(v, args[0]) for v in value)
-        return len(value) == len(args) and all(
-            _fits(v, a) for v, a in zip(value, args, strict=True)
-        )
-    return True  # nested dataclasses and other types are checked by their own loader
+            if not value:
+                raise fail("must not be empty")
+            return tuple(convert(args[0], x, key, where, error) for x in value)
+        if len(value) != len(args):
+            raise fail(f"must have {len(args)} values, got {_show(value)}")
+        if all(a is int for a in args) and not all(
+            isinstance(x, int) and not isinstance(x, bool) for x in value
+        ):
+            raise fail(f"must be integers, got {_show(value)}")
+        return tuple(convert(a, x, key, where, error) for a, x in zip(args, value, strict=True))
+    return value
 
 
-def _describe(hint) -> str:
-    origin = typing.get_origin(hint)
-    if origin in (types.UnionType, typing.Union):
-        return " or ".join(_describe(h) for h in typing.get_args(hint))
-    if hint is type(None):
-        return "none"
-    if origin is tuple:
-        args = typing.get_args(hint)
-        count = "" if len(args) == 2 and args[1] is Ellipsis else f"{len(args)} "
-        return f"a list of {count}{_PLURAL.get(args[0], 'values')}"
-    names = {bool: "true or false", int: "an integer", float: "a finite number", str: "a string"}
-    return names.get(hint, getattr(hint, "__name__", str(hint)))
-
-
-_PLURAL = {int: "integers", float: "finite numbers", str: "strings"}
-
-
-def check_table(cls, table, where: str, error: type[Exception] = ValueError) -> dict:
+def check_table(
+    cls, table, where: str, error: type[Exception] = ValueError, prefix: str = ""
+) -> dict:
     """Check a TOML/JSON table against the fields of dataclass ``cls``.
 
-    Unknown keys and values of the wrong type raise ``error`` naming ``where`` and the key; lists
-    become tuples. Nested dataclass fields are left to their own check. Ranges stay with each
-    config's own validation.
+    Unknown keys and values of the wrong type raise ``error`` naming ``where`` and the key
+    (``prefix`` + field name, e.g. ``poses.distance``); values are converted by ``convert``.
+    Nested dataclass fields are returned as they are, for the caller to build. Ranges stay with
+    each configuration's own validation.
 
     Returns:
         The keyword arguments for ``cls`` (only the keys present).
     """
-    require_table(table, where, error)
+    require_table(table, f"{where}: {prefix.rstrip('.')}" if prefix else where, error)
     hints = typing.get_type_hints(cls)
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(table) - known)
     if unknown:
-        raise error(f"{where}: unknown key(s) {unknown}; allowed: {sorted(known)}")
-    out = {}
-    for key, value in table.items():
-        if not _fits(value, hints[key]):
-            raise error(f"{where}: {key} must be {_describe(hints[key])}, got {_show(value)}")
-        out[key] = tuple(value) if isinstance(value, list) else value
-    return out
+        raise error(
+            f"{where}: {prefix}{unknown[0]}: unknown key(s) {unknown}; allowed: {sorted(known)}"
+        )
+    return {k: convert(hints[k], v, f"{prefix}{k}", where, error) for k, v in table.items()}
 
 
-__all__ = ["check_table", "require_list", "require_table"]
+__all__ = ["check_table", "convert", "require_list", "require_table"]

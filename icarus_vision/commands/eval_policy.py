@@ -61,6 +61,8 @@ def eval_policy_cmd(
     r = evaluate_policy(pilot, track, episodes=episodes, num_gates=gates, backend=backend,
                         randomize=randomize, seed=seed, difficulty=difficulty)  # fmt: skip
     r.update(time_optimal_fields(base, r["lap_time_s"]["median"], solve=plan))
+    if json_path is not None:  # results first: nothing printed below can lose them
+        atomic_write_json(json_path, r)
     table = Table(title=f"eval-policy: {r['policy']} on {r['track']} ({r['backend']})")
     table.add_column("metric")
     table.add_column("value")
@@ -85,5 +87,3 @@ def eval_policy_cmd(
     for k, v in rows:
         table.add_row(escape(k), escape(v))
     console.print(table)
-    if json_path is not None:
-        atomic_write_json(json_path, r)

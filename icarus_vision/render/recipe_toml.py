@@ -7,10 +7,9 @@ the file.
 
 from __future__ import annotations
 
-import math
 import os
 import typing
-from dataclasses import fields
+from dataclasses import fields, is_dataclass
 
 from icarus_vision.fileio import read_toml
 from icarus_vision.render.recipe_sections import (
@@ -23,63 +22,21 @@ from icarus_vision.render.recipe_sections import (
     TrackRanges,
 )
 from icarus_vision.render.textures import KINDS
+from icarus_vision.validation import check_table
 
 
 def _fail(source: str, key: str, msg: str) -> ValueError:
     return ValueError(f"{source}: {key}: {msg}")
 
 
-def _number(v, key: str, source: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise _fail(source, key, f"must be a finite number, got {v!r}")
-    return float(v)
-
-
-def _convert(tp, v, key: str, source: str):
-    """Check and convert one TOML value to the field type ``tp``."""
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if tp is str:
-        if not isinstance(v, str) or not v:
-            raise _fail(source, key, f"must be a non-empty string, got {v!r}")
-        return v
-    if tp is float:
-        return _number(v, key, source)
-    if tp is int:
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise _fail(source, key, f"must be an integer, got {v!r}")
-        return v
-    if origin is tuple:
-        if not isinstance(v, list | tuple):
-            raise _fail(source, key, f"must be a list, got {v!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            if not v:
-                raise _fail(source, key, "must not be empty")
-            return tuple(_convert(args[0], x, key, source) for x in v)
-        if len(v) != len(args):
-            raise _fail(source, key, f"must have {len(args)} values, got {v!r}")
-        if args == (int, int):
-            if not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
-                raise _fail(source, key, f"must be integers, got {v!r}")
-            return (int(v[0]), int(v[1]))
-        return tuple(_convert(a, x, key, source) for a, x in zip(args, v, strict=True))
-    raise TypeError(f"unsupported recipe field type {tp!r}")  # pragma: no cover
-
-
 def _build(cls, table, prefix: str, source: str):
     if not isinstance(table, dict):
-        raise _fail(source, prefix or "<top>", "must be a table")
+        raise _fail(source, prefix.rstrip(".") or "<top>", "must be a table")
+    kwargs = check_table(cls, table, source, ValueError, prefix)
     hints = typing.get_type_hints(cls)
-    known = {f.name: f for f in fields(cls)}
-    for key in table:
-        if key not in known:
-            raise _fail(source, f"{prefix}{key}", f"unknown key; allowed: {sorted(known)}")
-    kwargs = {}
-    for name, value in table.items():
-        tp = hints[name]
-        if isinstance(tp, type) and hasattr(tp, "__dataclass_fields__"):
-            kwargs[name] = _build(tp, value, f"{prefix}{name}.", source)
-        else:
-            kwargs[name] = _convert(tp, value, f"{prefix}{name}", source)
+    for name, value in kwargs.items():
+        if is_dataclass(hints[name]):
+            kwargs[name] = _build(hints[name], value, f"{prefix}{name}.", source)
     obj = cls(**kwargs)
     _validate(obj, prefix, source)
     return obj

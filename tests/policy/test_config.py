@@ -33,7 +33,7 @@ def test_load_config_overrides_preset(tmp_path):
     "text, match",
     [
         ("speed = 3\n", "unknown key.*speed"),
-        ("[ppo]\nlr = 0.1\n", r"\[ppo\]: unknown key.*lr"),
+        ("[ppo]\nlr = 0.1\n", r"\[ppo\]: lr: unknown key"),
         ("[ppo]\nlearning_rate = -1.0\n", "ppo.learning_rate is out of range"),
         ("[ppo]\nbatch_size = 100000000\n", "ppo.batch_size is out of range"),
         ('reward = "fastest"\n', "reward is out of range"),

@@ -175,12 +175,12 @@ def test_cli_resume_uses_the_runs_own_config(tmp_path):
         ({"randomization": {"wind_mps": -1.0}}, "wind_mps"),
         ({"perception": {"sigma_base_m": -0.1}}, "sigma_base_m"),
         ({"perception": {"miss_base": 3}}, "miss_base"),
-        ({"total_timesteps": 1.5}, "total_timesteps must be an integer"),
+        ({"total_timesteps": 1.5}, "total_timesteps: must be an integer"),
         ({"max_episode_s": -2.0}, "max_episode_s"),
-        ({"ppo": {"learning_rate": "fast"}}, "learning_rate must be a finite number"),
+        ({"ppo": {"learning_rate": "fast"}}, "learning_rate: must be a finite number"),
         ({"ppo": {"net_arch": [64, "x"]}}, "net_arch"),
         ({"curriculum": {"stages": 5}}, "stages"),
-        ({"reward": 3}, "reward must be a string"),
+        ({"reward": 3}, "reward: must be a non-empty string"),
     ],
 )
 def test_config_values_of_the_wrong_type_or_range_are_refused(table, match):
