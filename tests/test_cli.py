@@ -165,31 +165,14 @@ def test_train_refiner_margin_must_leave_an_opening(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+RACE = ["race", "--track", "single-gate", "--detector", "oracle", "--policy", "scripted"]
+
+
 @pytest.mark.parametrize(
     "args",
     [
-        [
-            "race",
-            "--track",
-            "single-gate",
-            "--detector",
-            "oracle",
-            "--policy",
-            "scripted",
-            "--out",
-            "{f}/sub",
-        ],
-        [
-            "race",
-            "--track",
-            "single-gate",
-            "--detector",
-            "oracle",
-            "--policy",
-            "scripted",
-            "--json",
-            "{f}/x.json",
-        ],
+        [*RACE, "--out", "{f}/sub"],
+        [*RACE, "--json", "{f}/x.json"],
         ["eval-policy", "--episodes", "1", "--json", "{f}/x.json"],
         ["plan", "--track", "single-gate", "--json", "{f}/x.json"],
         ["eval-estimator", "--track", "single-gate", "--detector", "oracle", "--out", "{f}/sub"],
