@@ -186,3 +186,22 @@ def test_outputs_under_a_file_are_refused_before_any_work(tmp_path, args):
     assert res.exit_code != 0
     assert "Traceback" not in res.output and "is a file" in res.output
     assert f.read_text() == "keep me"
+
+
+def test_race_summary_of_a_crash_with_a_cached_plan(tmp_path, monkeypatch):
+    """A race that does not finish on a planned track has no ratio: the summary prints '-'."""
+    import icarus_vision.racing.runner as runner_mod
+
+    real = runner_mod.run_race
+
+    def crashed(*args, **kwargs):
+        result = real(*args, **kwargs)
+        result.report.update(finished=False, crashed=True, crash_reason="ground",
+                             time_optimal_s=3.0, time_optimal_ratio=None, total_time_s=None)  # fmt: skip
+        return result
+
+    monkeypatch.setattr(runner_mod, "run_race", crashed)
+    res = runner.invoke(app, [*RACE, "--no-video", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    assert "3.00 / -" in res.output
+    assert json.loads((tmp_path / "o" / "report.json").read_text())["time_optimal_ratio"] is None

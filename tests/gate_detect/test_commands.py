@@ -147,3 +147,16 @@ def test_train_refiner_builds_the_refiner_asked_for_and_tunes_it(tiny_dataset, t
     assert params["widths"].default == ",".join(map(str, default.widths))
     assert params["hidden"].default == default.hidden
     assert params["square_hfov"].default == default.square_hfov_deg
+
+
+def test_corrupt_training_state_is_a_one_line_error(tmp_path):
+    import torch
+
+    from icarus_vision.gate_detect.cnn.train import load_state
+
+    bad = tmp_path / "train_state.pt"
+    bad.write_bytes(b"not a torch file")
+    opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=0.1)
+    sched = torch.optim.lr_scheduler.StepLR(opt, 1)
+    with pytest.raises(ValueError, match="train_state.pt: corrupt training state"):
+        load_state(bad, opt, sched)
