@@ -8,12 +8,13 @@ documented ranges, the keyword defaults of :class:`LayoutRanges`):
 * each gate is turned up to ±60° from the direction it is approached;
 * gate centres 0.5–6 m high (never so low that the frame touches the ground), up to ±3 m between
   neighbours; openings 0.8–1.5 m;
-* motifs, each drawn with probability ``motif_prob`` instead of a single gate:
-  ``split-s`` (a gate directly below the previous one, passed the other way), ``hairpin`` (the
+* with probability ``motif_prob`` the next element is a motif instead of a single gate (one of
+  the four, uniformly; where it does not fit, a single gate): ``split-s`` (a high gate, then a
+  gate directly below it passed the other way), ``hairpin`` (the
   previous gate flown again in the opposite direction), ``slalom`` (a row of parallel gates facing
   down the course, offset alternately left and right, so the path zigzags), ``spiral`` (gates
-  round a climbing or descending circle), and ``loop`` (the whole track: a closed circuit flown
-  two laps).
+  round a climbing or descending circle); and ``loop``: with probability ``motif_prob / 4``
+  (for an even gate count of at least 6) the whole track is a closed circuit flown two laps.
 
 ``difficulty`` in [0, 1] moves every range linearly from the classic one (0: spacing 4–8 m, turns
 ±60°, gates ±15° off their approach, 1–3 m high with ≤ 1 m changes, 1 m openings, no motifs) to
