@@ -8,8 +8,9 @@ documented ranges, the keyword defaults of :class:`LayoutRanges`):
 * each gate is turned up to ±60° from the direction it is approached;
 * gate centres 0.5–6 m high (never so low that the frame touches the ground), up to ±3 m between
   neighbours; openings 0.8–1.5 m;
-* with probability ``motif_prob`` the next element is a motif instead of a single gate (one of
-  the four, uniformly; where it does not fit, a single gate): ``split-s`` (a high gate, then a
+* with probability ``motif_prob`` the next element is a motif drawn uniformly from ``MOTIFS``
+  instead of a single gate (``loop`` drawn there, or a motif that does not fit, gives a single
+  gate, so each of the four below comes with probability ``motif_prob / 5``): ``split-s`` (a high gate, then a
   gate directly below it passed the other way), ``hairpin`` (the
   previous gate flown again in the opposite direction), ``slalom`` (a row of parallel gates facing
   down the course, offset alternately left and right, so the path zigzags), ``spiral`` (gates
