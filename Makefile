@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: race test lint format bench docs docs-media clean
+.PHONY: race test lint format bench docs docs-media train-generalist train-specialists clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -41,6 +41,17 @@ docs: $(STAMP)
 # The README's animation (docs/race.gif): plans grand-prix, flies it with the shipped models.
 docs-media: $(STAMP)
 	$(BIN)/python tools/race_gif.py --out docs/race.gif
+
+# The shipped racing generalist (icarus_vision/models/policy/default.*, from the second run's
+# best.*): two runs, about an hour on 2 cores. See docs/policy.md for how the shipped run differed.
+train-generalist: $(STAMP)
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing.toml --seed 0 --out runs/policy-racing --timesteps 34013184
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-speed.toml --seed 0 --out runs/policy-racing-speed --timesteps 29008384
+
+# The shipped specialists (models/policy/<track>-specialist.*, from each run's policy.*), side by side.
+train-specialists: $(STAMP)
+	$(BIN)/icarus-vision train-policy --config configs/policy-specialist-grand-prix.toml --seed 0 --out runs/specialist-grand-prix & \
+	$(BIN)/icarus-vision train-policy --config configs/policy-specialist-split-s.toml --seed 0 --out runs/specialist-split-s; wait
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/sim_throughput.py
