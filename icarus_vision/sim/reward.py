@@ -37,25 +37,26 @@ def reward_speed(vel: np.ndarray, to_gate: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", vel, to_gate / np.maximum(n, 1e-6))
 
 
-def reward_line(
-    p0: np.ndarray, p1: np.ndarray, seg_from: np.ndarray, gate: np.ndarray
-) -> np.ndarray:
-    """(N,) metres flown along the racing line this step.
+def reward_line(p0: np.ndarray, p1: np.ndarray, seg_from: np.ndarray, gate: np.ndarray) -> np.ndarray:
+    """(N,) metres gained along the racing line this step.
 
     Args:
         p0, p1: (N, 3) positions before and after the step.
         seg_from: (N, 3) start of each drone's segment: the previous gate, or the start position.
         gate: (N, 3) the target gate's centre, the segment's end.
 
-    The line is the segment's direction; where the segment is shorter than 1 m (a gate flown
-    straight back), the direction from p0 to the gate.
+    Progress is the change of the position's projection on the segment, clamped to the segment
+    (0 to its length): flying on past the gate's plane beside the gate earns nothing more, and
+    coming back costs what it earned. Where the segment is shorter than 1 m (a gate flown straight
+    back), the distance gained toward the gate instead.
     """
     seg = gate - seg_from
-    length = np.linalg.norm(seg, axis=1, keepdims=True)
-    to_gate = gate - p0
-    direction = np.where(length >= 1.0, seg, to_gate)
-    direction = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-9)
-    return np.einsum("ij,ij->i", p1 - p0, direction)
+    length = np.linalg.norm(seg, axis=1)
+    unit = seg / np.maximum(length, 1e-9)[:, None]
+    s0 = np.clip(np.einsum("ij,ij->i", p0 - seg_from, unit), 0.0, length)
+    s1 = np.clip(np.einsum("ij,ij->i", p1 - seg_from, unit), 0.0, length)
+    toward = np.linalg.norm(gate - p0, axis=1) - np.linalg.norm(gate - p1, axis=1)
+    return np.where(length >= 1.0, s1 - s0, toward)
 
 
 def camera_gate_angle(rot: np.ndarray, to_gate: np.ndarray, uptilt_rad: float) -> np.ndarray:

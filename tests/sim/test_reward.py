@@ -91,3 +91,14 @@ def test_env_logs_each_racing_line_term():
     _, reward2, _, infos = env.step(np.tile([0.2, 0.1, 0.0, 0.0], (4, 1)))
     assert infos[0]["reward_terms"]["action_change"] == pytest.approx(-2e-3 * 0.16)
     assert reward2[0] == pytest.approx(sum(infos[0]["reward_terms"].values()), rel=1e-5)
+
+
+def test_line_progress_stops_at_the_gate_plane():
+    """Flying on past the gate beside it earns nothing; coming back costs what was earned."""
+    seg_from, gate = np.array([[0.0, 0, 2]]), np.array([[10.0, 0, 2]])
+    past = reward_line(np.array([[10.5, 3, 2]]), np.array([[12.0, 3, 2]]), seg_from, gate)
+    assert past == pytest.approx([0.0])
+    across = reward_line(np.array([[9.5, 3, 2]]), np.array([[11.0, 3, 2]]), seg_from, gate)
+    assert across == pytest.approx([0.5])
+    back = reward_line(np.array([[11.0, 3, 2]]), np.array([[9.0, 3, 2]]), seg_from, gate)
+    assert back == pytest.approx([-1.0])
