@@ -37,7 +37,9 @@ def reward_speed(vel: np.ndarray, to_gate: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", vel, to_gate / np.maximum(n, 1e-6))
 
 
-def reward_line(p0: np.ndarray, p1: np.ndarray, seg_from: np.ndarray, gate: np.ndarray) -> np.ndarray:
+def reward_line(
+    p0: np.ndarray, p1: np.ndarray, seg_from: np.ndarray, gate: np.ndarray
+) -> np.ndarray:
     """(N,) metres gained along the racing line this step.
 
     Args:
