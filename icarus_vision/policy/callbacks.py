@@ -48,8 +48,7 @@ class CurriculumCallback(BaseCallback):
     @property
     def difficulty(self) -> float | None:
         """Race-layout difficulty of the current stage (None: classic layouts)."""
-        d = self.cfg.difficulty
-        return None if d is None else float(d[self.stage])
+        return self.cfg.difficulty_at(self.stage)
 
     def _on_training_start(self) -> None:
         self._apply()

@@ -65,6 +65,11 @@ class CurriculumConfig:
     """Race-layout difficulty at each stage (same length as ``stages``; see ``race_track``), so
     the curriculum widens the layouts as well as lengthening them; None: the classic
     ``random_track`` layouts at every stage."""
+
+    def difficulty_at(self, stage: int) -> float | None:
+        """Race-layout difficulty at ``stage`` (None: classic layouts)."""
+        return None if self.difficulty is None else float(self.difficulty[stage])
+
     promote_success: float = 0.8
     """Success rate (all gates, no crash) over the window needed to promote."""
     window: int = 100
@@ -148,11 +153,6 @@ class TrainConfig:
         else:
             base = RewardConfig(speed=0.5, time=-1.0)
         return replace(base, time=base.time - self.time_cost) if self.time_cost else base
-
-    def difficulty(self, stage: int) -> float | None:
-        """Race-layout difficulty at curriculum ``stage`` (None: classic layouts)."""
-        d = self.curriculum.difficulty
-        return None if d is None else float(d[stage])
 
 
 def validate_train_config(c: TrainConfig) -> None:

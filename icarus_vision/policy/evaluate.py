@@ -105,20 +105,16 @@ def time_optimal_fields(
         median_lap: the median lap of the successful episodes, s (None: ratio null).
         solve: plan the track when no plan is cached (the plan is cached for next time).
     """
-    from icarus_vision.planning.cache import load_cached
+    from icarus_vision.planning.command import plan_time_for_race, run_plan
 
     quad = quad or QuadParams()
     out = {"time_optimal_s": None, "time_optimal_ratio": None}
     if track is None:
         return out
-    hit = load_cached(track, quad)
-    if hit is not None:
-        best = hit.time_optimal_s
-    elif solve:
-        from icarus_vision.planning.command import run_plan
-
+    best = plan_time_for_race(track, quad)
+    if best is None and solve:
         best = run_plan(track, quad)["time_optimal_s"]
-    else:
+    if best is None:
         return out
     out["time_optimal_s"] = round(float(best), 4)
     if median_lap is not None:

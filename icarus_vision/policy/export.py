@@ -175,10 +175,11 @@ def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
     """
     import torch
 
-    from icarus_vision.policy.pilots import shipped_policy_path
+    from icarus_vision.policy.pilots import resolve_policy
 
-    path = shipped_policy_path(spec) or spec
-    policy = load_policy(path, expect_obs_dim=OBS_DIMS[observation])
+    policy = resolve_policy(spec, expect_obs_dim=OBS_DIMS[observation])
+    if not isinstance(policy, ExportedPolicy):
+        raise ValueError(f"cannot start training from {spec!r}: it is not an exported policy")
     pol = model.policy
     layers = [m for m in pol.mlp_extractor.policy_net if hasattr(m, "weight")]
     layers.append(pol.action_net)

@@ -207,8 +207,7 @@ def train_policy(
         raise ValueError(
             f"{ckpt_dir / 'last_state.json'}: curriculum stage {stage} is out of range for this config"
         )
-    difficulty = None if stages.difficulty is None else stages.difficulty[stage]
-    env = make_train_env(cfg, p.num_envs, stages.stages[stage], seed, difficulty)
+    env = make_train_env(cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage))
     if resume:
         try:
             model = PPO.load(ckpt_dir / "last.zip", env=env, device="cpu")

@@ -113,7 +113,7 @@ def test_init_copies_the_exported_actor_and_refuses_mismatches():
 
 def test_difficulty_curriculum_config_is_validated():
     cfg = config_from_dict({"curriculum": {"stages": [3, 10], "difficulty": [0.2, 1.0]}})
-    assert cfg.difficulty(1) == 1.0
+    assert cfg.curriculum.difficulty_at(1) == 1.0
     with pytest.raises(ValueError, match="curriculum.difficulty"):
         config_from_dict({"curriculum": {"stages": [3, 10], "difficulty": [0.2]}})
     with pytest.raises(ValueError, match="curriculum.difficulty"):
