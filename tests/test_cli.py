@@ -80,7 +80,7 @@ def test_train_detector_bad_input_size_is_one_line_error(tmp_path):
         (["race", "--detector", "sonar"], "sonar"),
         (["race", "--policy", "nope.safetensors"], "nope.safetensors: policy file not found"),
         (["race", "--track", "missing.toml"], "missing.toml: track file not found"),
-        (["race", "--backend", "mujoco"], "unknown backend"),
+        (["race", "--backend", "ode"], "unknown backend"),
         (["race", "--quad", "nope.toml"], "nope.toml: quadrotor file not found"),
     ],
 )

@@ -38,7 +38,11 @@ def eval_policy_cmd(
         "time_optimal_ratio (a cached plan is always used).",
     ),
     episodes: int = typer.Option(100, min=1, help="Episodes."),
-    backend: str = typer.Option("batched", help="batched or pybullet."),
+    backend: str = typer.Option(
+        "batched",
+        help="batched (all episodes at once), pybullet, mujoco, or an installed plug-in's name "
+        "(one episode after another).",
+    ),
     randomize: bool = typer.Option(
         False, "--randomize/--no-randomize", help="Domain randomisation."
     ),

@@ -31,7 +31,9 @@ def race_cmd(
         "or scripted.",
     ),
     backend: str = typer.Option(
-        "pybullet", help="Physics backend: pybullet or batched (camera renders via PyBullet)."
+        "pybullet",
+        help="Physics backend: pybullet, mujoco, batched, or an installed plug-in's name (the "
+        "camera renders through PyBullet whichever flies).",
     ),
     randomize: bool = typer.Option(
         False, "--randomize/--no-randomize", help="Randomise mass, wind and gates."

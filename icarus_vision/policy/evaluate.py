@@ -10,7 +10,7 @@ from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.quad import QuadParams
-from icarus_vision.sim.registration import make_env
+from icarus_vision.sim.registration import check_backend, make_env
 from icarus_vision.sim.track import Track
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
@@ -61,7 +61,8 @@ def evaluate_policy(
         policy: an ExportedPolicy or "scripted".
         track: a built-in name or TOML path; None flies random tracks of ``num_gates`` gates (one
             new track per episode, seeded).
-        backend: "batched" (all episodes at once, one drone each) or "pybullet" (one after another).
+        backend: "batched" (all episodes at once, one drone each), or any other backend's name
+            ("pybullet", "mujoco", a plug-in's), flown one episode after another.
         randomize: domain randomisation (mass, thrust, wind, gate jitter).
         difficulty: random tracks only: None draws classic ``random_track`` layouts, a value in
             [0, 1] ``race_track`` layouts of that difficulty.
@@ -77,12 +78,11 @@ def evaluate_policy(
         track=base, random_tracks=base is None, num_gates=num_gates if base is None else None,
         layout_difficulty=difficulty if base is None else None, randomization=RandomizationConfig(enabled=randomize), observation=obs_mode,
     )  # fmt: skip
+    check_backend(backend)
     if backend == "batched":
         results = _run_batched(policy, cfg, episodes, seed)
-    elif backend == "pybullet":
-        results = _run_sequential(policy, cfg, episodes, seed)
     else:
-        raise ValueError(f"unknown backend {backend!r}; choose batched or pybullet")
+        results = _run_sequential(policy, cfg, episodes, seed, backend)
     name = policy.name if isinstance(policy, ExportedPolicy) else policy
     track_name = base.name if base is not None else f"random-{num_gates}"
     if base is None and difficulty is not None:
@@ -155,8 +155,8 @@ def _run_batched(policy, cfg: EnvConfig, episodes: int, seed: int) -> list[dict]
     return results  # type: ignore[return-value]
 
 
-def _run_sequential(policy, cfg: EnvConfig, episodes: int, seed: int) -> list[dict]:
-    env = make_env("pybullet", config=cfg)
+def _run_sequential(policy, cfg: EnvConfig, episodes: int, seed: int, backend: str) -> list[dict]:
+    env = make_env(backend, config=cfg)
     act = _pilot(policy, env)
     results = []
     try:

@@ -1,7 +1,7 @@
 """Fly one race with the whole pipeline in the loop and build its report.
 
-``run_race`` resolves the track, quadrotor, detector and pilot, builds the PyBullet (or batched)
-world and the rendering scene, flies ``fly_loop`` and returns the report of ARCHITECTURE.md with
+``run_race`` resolves the track, quadrotor, detector and pilot, builds the physics
+backend's world and the rendering scene, flies ``fly_loop`` and returns the report of ARCHITECTURE.md with
 the trajectory and, when asked, the video frames.
 """
 
@@ -24,7 +24,7 @@ from icarus_vision.render.camera import Camera
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.quad import QuadParams
-from icarus_vision.sim.registration import BACKENDS, make_env
+from icarus_vision.sim.registration import check_backend, make_env
 from icarus_vision.sim.track import Track
 
 DETECTORS = ("cnn", "opencv", "oracle")
@@ -95,13 +95,13 @@ def run_race(
         detector: ``cnn[:PATH]``, ``opencv`` or ``oracle`` (true gate position, no camera).
         policy: ``auto`` (the track's shipped specialist, else the generalist), ``default`` (the
             generalist), a shipped name, a path to an exported policy, or ``scripted``.
-        backend: physics backend; the camera renders through PyBullet either way.
+        backend: physics backend (batched, pybullet, mujoco or a plug-in's name); the camera
+            renders through PyBullet either way.
         randomize: mass, thrust, wind and gate jitter from the training ranges.
         latency_frames: camera frames between an image and its detections reaching the estimator.
         video: keep composed video frames (FPV with detections beside a top view).
     """
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    check_backend(backend)
     if latency_frames < 0:
         raise ValueError(f"latency_frames must be >= 0, got {latency_frames}")
     det_name, _ = parse_spec(detector)

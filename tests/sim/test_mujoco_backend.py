@@ -1,0 +1,77 @@
+"""The MuJoCo backend's own model: built from the quadrotor file, rebuilt per track, flown in a race.
+
+The contract, hover, free fall, rate lag, gate passage and crash tests run on it through the
+``backend`` fixture (tests/conftest.py); these check what is MuJoCo's alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+import pytest
+
+from icarus_vision.racing.runner import run_race
+from icarus_vision.sim.builtin import BUILTIN_TRACKS, builtin_track
+from icarus_vision.sim.config import EnvConfig, RandomizationConfig
+from icarus_vision.sim.mujoco_backend import MuJoCoDroneRacingEnv, model_xml
+from icarus_vision.sim.quad import QuadParams
+
+
+@pytest.mark.parametrize("name", BUILTIN_TRACKS)
+def test_every_builtin_track_compiles_with_one_body_per_physical_gate(name):
+    track = builtin_track(name)
+    m = mujoco.MjModel.from_xml_string(model_xml(track, QuadParams(), 200.0))
+    gates = len(track.physical_gates())
+    assert m.nbody == 1 + gates + 1  # world, gates, drone
+    assert m.ngeom == 1 + 4 * gates + 1  # ground, four bars each, drone sphere
+    assert m.opt.timestep == pytest.approx(1 / 200)
+    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICIT
+
+
+def test_the_body_and_actuators_come_from_the_quadrotor_file():
+    quad = replace(QuadParams(), mass=0.8, inertia=(0.003, 0.004, 0.006), radius=0.2,
+                   motor_tau=0.05, max_rate=(8.0, 9.0, 3.0))  # fmt: skip
+    m = mujoco.MjModel.from_xml_string(model_xml(builtin_track("single-gate"), quad, 100.0))
+    drone = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "drone")
+    assert m.body_mass[drone] == pytest.approx(0.8)
+    np.testing.assert_allclose(m.body_inertia[drone], (0.003, 0.004, 0.006))
+    assert m.geom_size[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "drone"), 0] == 0.2
+    assert m.actuator_dynprm[0, 0] == pytest.approx(0.05)  # thrust lag
+    np.testing.assert_allclose(m.actuator_ctrlrange[0], (0.0, quad.thrust_max))
+    np.testing.assert_allclose(m.actuator_ctrlrange[1:, 1], (8.0, 9.0, 3.0))
+    np.testing.assert_allclose(m.actuator_gainprm[1:, 0], np.array(quad.inertia) / 0.05)
+
+
+def test_randomised_mass_and_thrust_reach_the_model_each_episode():
+    cfg = EnvConfig(track="three-gates", randomization=RandomizationConfig(enabled=True))
+    env = MuJoCoDroneRacingEnv(cfg)
+    masses = set()
+    for seed in range(3):
+        env.reset(seed=seed)
+        m = env.model
+        assert m.body_mass[env._body] == env.core.params.mass[0]
+        assert m.actuator_ctrlrange[0, 1] == env.core.params.thrust_max[0]
+        masses.add(float(m.body_mass[env._body]))
+    assert len(masses) == 3
+    env.close()
+
+
+def test_the_world_is_rebuilt_only_when_the_track_changes():
+    env = MuJoCoDroneRacingEnv(track="three-gates")
+    env.reset(seed=0)
+    model = env.model
+    env.reset(seed=1)
+    assert env.model is model
+    env = MuJoCoDroneRacingEnv(EnvConfig(random_tracks=True, num_gates=3))
+    env.reset(seed=0)
+    model = env.model
+    env.reset(seed=1)
+    assert env.model is not model
+
+
+def test_a_race_flies_on_mujoco():
+    res = run_race("three-gates", backend="mujoco", detector="oracle", policy="default", seed=0)
+    assert res.report["backend"] == "mujoco"
+    assert res.report["finished"] and not res.report["crashed"]
