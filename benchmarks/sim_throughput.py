@@ -1,4 +1,4 @@
-"""Simulation throughput: batched backend env-steps/s (256 drones) and PyBullet control steps/s (1 drone).
+"""Simulation throughput: batched env-steps/s (256 drones), PyBullet and MuJoCo control steps/s (1 drone).
 
 Run on a quiet machine: ``.venv/bin/python benchmarks/sim_throughput.py [--repeats 5]``.
 Both figures are measured on one core (the process is pinned to one CPU and BLAS threads are set
@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from icarus_vision.policy.scripted import ScriptedController  # noqa: E402
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig  # noqa: E402
-from icarus_vision.sim.pybullet_backend import PyBulletDroneRacingEnv  # noqa: E402
+from icarus_vision.sim.registration import make_env  # noqa: E402
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv  # noqa: E402
 
 
@@ -55,8 +55,9 @@ def bench_batched(n: int = 256, steps: int = 500) -> tuple[float, float]:
     return n * steps / spent, 1000 * episodes / (n * steps)
 
 
-def bench_pybullet(steps: int = 2000) -> float:
-    env = PyBulletDroneRacingEnv(track="ten-gates")
+def bench_single(backend: str, steps: int = 2000) -> float:
+    """Control steps/s of one drone on ``backend`` flying ``ten-gates`` (resets included)."""
+    env = make_env(backend, track="ten-gates")
     obs, _ = env.reset(seed=0)
     ctrl, rng = ScriptedController(env.config.quad), np.random.default_rng(0)
     spent = 0.0
@@ -81,16 +82,19 @@ def main() -> None:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     runs = [bench_batched(args.drones) for _ in range(args.repeats)]
     batched = [r[0] for r in runs]
-    pyb = [bench_pybullet() for _ in range(args.repeats)]
+    pyb = [bench_single("pybullet") for _ in range(args.repeats)]
+    mjc = [bench_single("mujoco") for _ in range(args.repeats)]
     result = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, 1 core used",
         "batched_env_steps_per_s": round(statistics.median(batched)),
         "batched_drones": args.drones,
         "batched_episodes_per_1000_steps": round(statistics.median(r[1] for r in runs), 2),
         "pybullet_control_steps_per_s": round(statistics.median(pyb)),
+        "mujoco_control_steps_per_s": round(statistics.median(mjc)),
         "repeats": args.repeats,
         "batched_all": [round(x) for x in batched],
         "pybullet_all": [round(x) for x in pyb],
+        "mujoco_all": [round(x) for x in mjc],
     }
     print(json.dumps(result, indent=2))
     if args.json:

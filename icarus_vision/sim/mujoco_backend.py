@@ -33,6 +33,7 @@ from icarus_vision.sim.quad import GRAVITY, QuadParams
 from icarus_vision.sim.track import Track
 
 INTEGRATOR = "implicit"
+_WXYZ, _XYZW = [3, 0, 1, 2], [4, 5, 6, 3]
 
 
 def _vec(v) -> str:
@@ -122,7 +123,7 @@ class MuJoCoDroneRacingEnv(DroneRacingEnv):
         m.actuator_ctrlrange[0, 1] = params.thrust_max[0]
         mujoco.mj_resetData(m, d)
         d.qpos[:3] = state.pos[0]
-        d.qpos[3:7] = np.roll(state.quat[0], 1)  # x, y, z, w -> MuJoCo's w, x, y, z
+        d.qpos[3:7] = state.quat[0, _WXYZ]  # MuJoCo's quaternions are w, x, y, z
         d.qvel[:3] = state.vel[0]
         d.qvel[3:6] = state.omega[0]  # a free joint's angular velocity is in the body frame
         d.act[0] = state.thrust[0]
@@ -132,7 +133,7 @@ class MuJoCoDroneRacingEnv(DroneRacingEnv):
     def _read_state(self) -> None:
         d, s = self.data, self.state
         s.pos[0] = d.qpos[:3]
-        s.quat[0] = np.roll(d.qpos[3:7], -1)
+        s.quat[0] = d.qpos[_XYZW]
         s.vel[0] = d.qvel[:3]
         s.omega[0] = d.qvel[3:6]
         s.thrust[0] = d.act[0]
@@ -144,12 +145,14 @@ class MuJoCoDroneRacingEnv(DroneRacingEnv):
         d.ctrl[1:4] = rate_cmd[0]
         trail = np.empty((self.config.substeps, 1, 3))
         frame_hit = ground_hit = False
-        j, drag, air0 = params.inertia, params.drag, wind[0]
+        drag, air0 = params.drag, wind[0]
+        jz_jy, jx_jz, jy_jx = params.inertia[[2, 0, 1]] - params.inertia[[1, 2, 0]]
+        wrench = d.xfrc_applied[self._body]
         for k in range(self.config.substeps):
-            rot, w = self._rot, d.qvel[3:6]
-            air_body = rot.T @ (d.qvel[:3] - air0)
-            d.xfrc_applied[self._body, :3] = rot @ (-drag * air_body)
-            d.xfrc_applied[self._body, 3:] = rot @ np.cross(w, j * w)  # gyroscopic feed-forward
+            rot, (wx, wy, wz) = self._rot, d.qvel[3:6]
+            wrench[:3] = rot @ (-drag * ((d.qvel[:3] - air0) @ rot))  # drag on the airspeed
+            # the rate controller's gyroscopic feed-forward ω × Jω (diagonal J)
+            wrench[3:] = rot @ (jz_jy * wy * wz, jx_jz * wz * wx, jy_jx * wx * wy)
             mujoco.mj_step(m, d)
             self._read_state()
             trail[k, 0] = d.qpos[:3]
