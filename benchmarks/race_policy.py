@@ -1,11 +1,13 @@
 """The racing policy's figures in the whole loop (PyBullet, camera, detector, estimator, policy).
 
-    .venv/bin/python benchmarks/race_policy.py builtin [--seeds 20] [--detector cnn] [--json PATH]
+    .venv/bin/python benchmarks/race_policy.py builtin [--seeds 20] [--detector cnn]
+        [--policy default] [--backend pybullet] [--json PATH]
     .venv/bin/python benchmarks/race_policy.py specialists [--seeds 20] [--json PATH]
     .venv/bin/python benchmarks/race_policy.py vision [--tracks 60] [--difficulty 1.0] [--json PATH]
 
 ``builtin``: every built-in track, `race --randomize --detector cnn --policy default` (the
-generalist) for seeds 100.., finish rate per track, median detection rate, and the median lap over
+generalist; ``--policy auto`` flies the shipped specialists where there are some) on
+``--backend`` (default pybullet) for seeds 100.., finish rate per track, median detection rate, and the median lap over
 the track's time-optimal plan where one is cached (`icarus-vision plan --track NAME`).
 ``specialists``: `grand-prix` and `split-s` with `--policy auto` (their shipped specialists), seeds
 100.., randomised, with ground truth (`--detector oracle`) and with the CNN: finish rate and median
@@ -52,10 +54,11 @@ def _summary(reports: list[dict]) -> dict:
     }
 
 
-def builtin(seeds: int, detector: str) -> dict:
+def builtin(seeds: int, detector: str, policy: str = "default", backend: str = "pybullet") -> dict:
     out = {}
     for name in BUILTIN_TRACKS:
-        reports = [run_race(name, detector=detector, policy="default", seed=s, randomize=True).report
+        reports = [run_race(name, detector=detector, policy=policy, seed=s, randomize=True,
+                            backend=backend).report
                    for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
         out[name] = _summary(reports)
         print(name, out[name], flush=True)
@@ -98,11 +101,14 @@ def main() -> None:
     ap.add_argument("--tracks", type=int, default=60)
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--detector", default="cnn")
+    ap.add_argument("--policy", default="default", help="builtin: default or auto")
+    ap.add_argument("--backend", default="pybullet", help="builtin: the physics backend")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     t0 = time.perf_counter()
     if args.what == "builtin":
-        out = builtin(args.seeds, args.detector)
+        out = builtin(args.seeds, args.detector, args.policy, args.backend)
+        out["backend"], out["policy_asked"] = args.backend, args.policy
     elif args.what == "specialists":
         out = specialists(args.seeds)
     else:

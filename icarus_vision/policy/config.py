@@ -196,6 +196,8 @@ def validate_train_config(c: TrainConfig) -> None:
         ("time_cost", c.time_cost >= 0),
         ("randomization.mass_pct", 0 <= c.randomization.mass_pct < 1),
         ("randomization.thrust_pct", 0 <= c.randomization.thrust_pct < 1),
+        ("randomization.motor_tau_pct", 0 <= c.randomization.motor_tau_pct < 1),
+        ("randomization.drag_pct", 0 <= c.randomization.drag_pct < 1),
         ("randomization.wind_mps", c.randomization.wind_mps >= 0),
         ("randomization.gust_mps", c.randomization.gust_mps >= 0),
         ("randomization.gate_pos_jitter_m", c.randomization.gate_pos_jitter_m >= 0),

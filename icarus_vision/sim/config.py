@@ -75,6 +75,11 @@ class RandomizationConfig:
     """Each gate heading turned uniformly within ± this."""
     start_pos_jitter_m: float = 0.0
     """Start position moved horizontally within ± this."""
+    motor_tau_pct: float = 0.0
+    """Thrust and rate-loop time constant scaled by a draw in [1 − p, 1 + p] (a different rate
+    controller or motors; 0: the file's)."""
+    drag_pct: float = 0.0
+    """Each body axis's drag coefficient scaled by its own draw in [1 − p, 1 + p] (0: the file's)."""
 
 
 @dataclass(frozen=True)

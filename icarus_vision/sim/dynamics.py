@@ -69,8 +69,8 @@ class QuadBatchParams:
         thrust_max: (N,) N.
         inertia: (3,) kg m² (shared).
         max_rate: (3,) rad/s.
-        drag: (3,) N/(m/s), body frame.
-        motor_tau: s.
+        drag: (N, 3) N/(m/s), body frame.
+        motor_tau: (N,) s, the thrust and rate lag.
         radius: m.
     """
 
@@ -79,7 +79,7 @@ class QuadBatchParams:
     inertia: np.ndarray
     max_rate: np.ndarray
     drag: np.ndarray
-    motor_tau: float
+    motor_tau: np.ndarray
     radius: float
 
     @classmethod
@@ -89,8 +89,8 @@ class QuadBatchParams:
             thrust_max=np.full(n, quad.thrust_max),
             inertia=np.array(quad.inertia, float),
             max_rate=np.array(quad.max_rate, float),
-            drag=np.array(quad.drag, float),
-            motor_tau=quad.motor_tau,
+            drag=np.tile(np.array(quad.drag, float), (n, 1)),
+            motor_tau=np.full(n, quad.motor_tau),
             radius=quad.radius,
         )
 
@@ -211,15 +211,15 @@ def action_to_commands(
     return thrust_cmd, rate_cmd
 
 
-def lag_gain(dt: float, tau: float) -> float:
-    """Exact discrete gain of a first-order lag over dt."""
-    return float(1.0 - np.exp(-dt / tau))
+def lag_gain(dt: float, tau: np.ndarray) -> np.ndarray:
+    """Exact discrete gain of first-order lags with time constants ``tau`` (N,) over dt."""
+    return 1.0 - np.exp(-dt / np.asarray(tau, float))
 
 
 def drag_force(rot: np.ndarray, vel: np.ndarray, wind: np.ndarray, drag: np.ndarray) -> np.ndarray:
-    """World-frame drag force (N, 3) on the airspeed, with drag diagonal in the body frame."""
+    """World-frame drag force (N, 3) on the airspeed, with drag (N, 3) diagonal in the body frame."""
     air_b = np.matmul((vel - wind)[:, None, :], rot)  # (N, 1, 3): Rᵀ (v − w) as a row
-    return np.matmul(rot, (air_b * -drag).transpose(0, 2, 1))[:, :, 0]
+    return np.matmul(rot, (air_b * -drag[:, None, :]).transpose(0, 2, 1))[:, :, 0]
 
 
 def body_wrench(
@@ -247,7 +247,7 @@ def body_wrench(
     j, w = params.inertia, state.omega
     # ω × Jω for a diagonal J: ((Jz − Jy) ωy ωz, (Jx − Jz) ωz ωx, (Jy − Jx) ωx ωy)
     gyro = (j[_C2] - j[_C1]) * w[:, _C1] * w[:, _C2]
-    torque = j * (rate_cmd - w) * (k / dt) + gyro
+    torque = j * (rate_cmd - w) * (k / dt)[:, None] + gyro
     return thrust, force, np.matmul(rot, torque[:, :, None])[:, :, 0]
 
 
@@ -278,7 +278,7 @@ def step_substeps(
     trail = np.empty((substeps, state.pos.shape[0], 3))
     for s in range(substeps):
         state.thrust += (thrust_cmd - state.thrust) * k
-        state.omega += (rate_cmd - state.omega) * k
+        state.omega += (rate_cmd - state.omega) * k[:, None]
         rot = quat_to_rot(state.quat)
         acc = (
             rot[:, :, 2] * state.thrust[:, None] + drag_force(rot, state.vel, wind, params.drag)

@@ -119,8 +119,13 @@ class MuJoCoDroneRacingEnv(DroneRacingEnv):
         if self.model is None or self._world_track != track:
             self._build(track)
         m, d, params = self.model, self.data, self.core.params
-        m.body_mass[self._body] = params.mass[0]  # randomised per episode; inertia stays the file's
+        # randomised per episode: mass (the inertia stays the file's), thrust, the lag of the
+        # thrust and of the rate loop
+        m.body_mass[self._body] = params.mass[0]
         m.actuator_ctrlrange[0, 1] = params.thrust_max[0]
+        m.actuator_dynprm[0, 0] = params.motor_tau[0]
+        kv = params.inertia / params.motor_tau[0]
+        m.actuator_gainprm[1:4, 0], m.actuator_biasprm[1:4, 2] = kv, -kv
         mujoco.mj_resetData(m, d)
         d.qpos[:3] = state.pos[0]
         d.qpos[3:7] = state.quat[0, _WXYZ]  # MuJoCo's quaternions are w, x, y, z
@@ -145,7 +150,7 @@ class MuJoCoDroneRacingEnv(DroneRacingEnv):
         d.ctrl[1:4] = rate_cmd[0]
         trail = np.empty((self.config.substeps, 1, 3))
         frame_hit = ground_hit = False
-        drag, air0 = params.drag, wind[0]
+        drag, air0 = params.drag[0], wind[0]
         jz_jy, jx_jz, jy_jx = params.inertia[[2, 0, 1]] - params.inertia[[1, 2, 0]]
         wrench = d.xfrc_applied[self._body]
         for k in range(self.config.substeps):

@@ -176,6 +176,7 @@ class RaceCore:
             self.gates_per_lap[i] = len(track.gates)
             self.bounds_lo[i], self.bounds_hi[i] = track.bounds_min, track.bounds_max
             mass, thrust_max = cfg.quad.mass, cfg.quad.thrust_max
+            tau, drag = cfg.quad.motor_tau, np.array(cfg.quad.drag, float)
             self.wind_const[i] = 0.0
             self.gust_amp[i] = 0.0
             start = np.array(track.start_pos, float)
@@ -186,7 +187,13 @@ class RaceCore:
                 self.wind_const[i], self.gust_amp[i], self.gust_freq[i], self.gust_phase[i] = wind
                 if r.start_pos_jitter_m > 0:
                     start[:2] += rng.uniform(-r.start_pos_jitter_m, r.start_pos_jitter_m, 2)
+                # drawn only when asked, so configs without them keep their episodes
+                if r.motor_tau_pct > 0:
+                    tau *= rng.uniform(1 - r.motor_tau_pct, 1 + r.motor_tau_pct)
+                if r.drag_pct > 0:
+                    drag *= rng.uniform(1 - r.drag_pct, 1 + r.drag_pct, 3)
             self.params.mass[i], self.params.thrust_max[i] = mass, thrust_max
+            self.params.motor_tau[i], self.params.drag[i] = tau, drag
             state.pos[k] = start
             self.start_pos[i] = start
             start_yaw[k] = math.radians(track.start_yaw_deg)

@@ -172,6 +172,7 @@ def test_cli_resume_uses_the_runs_own_config(tmp_path):
     "table, match",
     [
         ({"randomization": {"mass_pct": 5}}, "mass_pct"),
+        ({"randomization": {"drag_pct": 1.0}}, "drag_pct"),
         ({"randomization": {"wind_mps": -1.0}}, "wind_mps"),
         ({"perception": {"sigma_base_m": -0.1}}, "sigma_base_m"),
         ({"perception": {"miss_base": 3}}, "miss_base"),

@@ -214,6 +214,26 @@ def test_domain_randomisation_is_seeded_and_off_by_default():
     assert not np.allclose(gates0, vec.core.g_pos[1, :5])  # gate jitter differs per drone
 
 
+def test_dynamics_randomisation_leaves_the_older_draws_alone():
+    def drones(**extra):
+        r = RandomizationConfig(enabled=True, **extra)
+        vec = BatchedRacingVecEnv(32, random_tracks=True, num_gates=5, randomization=r)
+        vec.seed(7)
+        vec.reset()
+        return vec.core
+
+    base, dyn = drones(), drones(motor_tau_pct=0.2, drag_pct=0.3)
+    assert np.all(base.params.motor_tau == 0.03) and np.all(base.params.drag == (0.3, 0.3, 0.5))
+    # the new draws come last: mass, wind, tracks and gates are the episodes they were
+    np.testing.assert_array_equal(base.params.mass, dyn.params.mass)
+    np.testing.assert_array_equal(base.wind_const, dyn.wind_const)
+    np.testing.assert_array_equal(base.g_pos, dyn.g_pos)
+    tau, drag = dyn.params.motor_tau, dyn.params.drag
+    assert 0.024 <= tau.min() and tau.max() <= 0.036 and tau.std() > 0.002
+    assert drag.shape == (32, 3) and np.all(np.abs(drag / (0.3, 0.3, 0.5) - 1) <= 0.3)
+    assert len(np.unique(drag[:, 0])) == 32
+
+
 def test_gate_relative_obs_wrapper_matches_body_frame_env():
     world = GateRelativeObsWrapper(BatchedDroneRacingEnv(track="three-gates"))
     body = BatchedDroneRacingEnv(track="three-gates", gate_obs_frame="body")

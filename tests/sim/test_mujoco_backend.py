@@ -44,15 +44,17 @@ def test_the_body_and_actuators_come_from_the_quadrotor_file():
     np.testing.assert_allclose(m.actuator_gainprm[1:, 0], np.array(quad.inertia) / 0.05)
 
 
-def test_randomised_mass_and_thrust_reach_the_model_each_episode():
-    cfg = EnvConfig(track="three-gates", randomization=RandomizationConfig(enabled=True))
-    env = MuJoCoDroneRacingEnv(cfg)
+def test_randomised_dynamics_reach_the_model_each_episode():
+    rand = RandomizationConfig(enabled=True, motor_tau_pct=0.2, drag_pct=0.3)
+    env = MuJoCoDroneRacingEnv(EnvConfig(track="three-gates", randomization=rand))
     masses = set()
     for seed in range(3):
         env.reset(seed=seed)
-        m = env.model
-        assert m.body_mass[env._body] == env.core.params.mass[0]
-        assert m.actuator_ctrlrange[0, 1] == env.core.params.thrust_max[0]
+        m, p = env.model, env.core.params
+        assert m.body_mass[env._body] == p.mass[0]
+        assert m.actuator_ctrlrange[0, 1] == p.thrust_max[0]
+        assert m.actuator_dynprm[0, 0] == p.motor_tau[0] != QuadParams().motor_tau
+        np.testing.assert_allclose(m.actuator_gainprm[1:4, 0], p.inertia / p.motor_tau[0])
         masses.add(float(m.body_mass[env._body]))
     assert len(masses) == 3
     env.close()
