@@ -1,6 +1,7 @@
 """The sim-to-sim gap: the shipped policies on the batched, PyBullet and MuJoCo backends, ground truth.
 
-    .venv/bin/python benchmarks/backend_gap.py [--episodes 300] [--seeds 20] [--json PATH]
+    .venv/bin/python benchmarks/backend_gap.py [--episodes 300] [--seeds 20] [--policy auto]
+        [--json PATH]
 
 ``random``: the generalist (``default``) on ``--episodes`` random race layouts
 (``race_track(10, seed, difficulty=1)``, the racing issue's distribution), domain randomisation on
@@ -10,6 +11,7 @@ is one, else the generalist), randomised, ``--seeds`` episodes each: finish rate
 Ground truth means the observation carries the true next-gate position (eval-policy); the camera
 and detector in the loop are ``race_policy.py builtin --backend mujoco``. Each backend's
 difference from PyBullet (the backend the policies are flown on in ``race``) is printed in points.
+``--policy NAME|PATH`` flies that policy everywhere instead (random layouts and every track).
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ def _row(r: dict) -> dict:
             "crash_reasons": r.get("crash_reasons"), "policy": r["policy"]}  # fmt: skip
 
 
-def random_layouts(episodes: int) -> dict:
-    pol = resolve_policy("default")
+def random_layouts(episodes: int, policy: str) -> dict:
+    pol = resolve_policy("default" if policy == "auto" else policy)
     out = {}
     for b in BACKENDS:
         t0 = time.perf_counter()
@@ -44,10 +46,10 @@ def random_layouts(episodes: int) -> dict:
     return out
 
 
-def builtin(seeds: int) -> dict:
+def builtin(seeds: int, policy: str) -> dict:
     out = {}
     for name in BUILTIN_TRACKS:
-        pol = resolve_policy("auto", track=resolve_track(name))
+        pol = resolve_policy(policy, track=resolve_track(name))
         out[name] = {}
         for b in BACKENDS:
             r = evaluate_policy(pol, name, episodes=seeds, backend=b, randomize=True, seed=SEED0)
@@ -71,10 +73,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episodes", type=int, default=300)
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--policy", default="auto", help="auto, a shipped name or an exported path")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     t0 = time.perf_counter()
-    res = {"random": random_layouts(args.episodes), "builtin": builtin(args.seeds)}
+    res = {"policy": args.policy, "random": random_layouts(args.episodes, args.policy),
+           "builtin": builtin(args.seeds, args.policy)}  # fmt: skip
     res["gap_points_vs_pybullet"] = gaps(res)
     res["wall_s"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(res, indent=1))
