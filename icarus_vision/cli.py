@@ -74,6 +74,7 @@ from icarus_vision.commands import gen_dataset as _gen_dataset  # noqa: E402,F40
 from icarus_vision.commands import plan as _plan  # noqa: E402,F401
 from icarus_vision.commands import quantize_detector as _quantize_detector  # noqa: E402,F401
 from icarus_vision.commands import race as _race  # noqa: E402,F401
+from icarus_vision.commands import sweep as _sweep  # noqa: E402,F401
 from icarus_vision.commands import tracks as _tracks  # noqa: E402,F401
 from icarus_vision.commands import train_detector as _train_detector  # noqa: E402,F401
 from icarus_vision.commands import train_policy as _train_policy  # noqa: E402,F401

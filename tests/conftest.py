@@ -1,4 +1,4 @@
-"""Shared fixtures: both physics backends, for contract tests over every implementation."""
+"""Shared fixtures: every physics backend, for contract tests over each; Ray, started once."""
 
 from __future__ import annotations
 
@@ -25,3 +25,17 @@ def make(backend):
     yield _make
     for env in envs:
         env.close()
+
+
+@pytest.fixture(scope="session")
+def ray_here():
+    """Ray started once per test session on this machine (sweep and gen-dataset --ray reuse a
+    running Ray instead of starting their own)."""
+    import os
+
+    import ray
+
+    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
+    ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
+    yield
+    ray.shutdown()

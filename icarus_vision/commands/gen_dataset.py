@@ -42,6 +42,15 @@ def gen_dataset_cmd(
         help="tiny (PyBullet's TinyRenderer, CPU) or egl (its EGL plugin: OpenGL on the GPU, or "
         "Mesa's software renderer without one).",
     ),
+    ray: bool = typer.Option(
+        False,
+        "--ray",
+        help="Render the shards as Ray tasks: on this machine's cores, or on a cluster with "
+        "--address (the same files either way; --workers is then unused).",
+    ),
+    address: str = typer.Option(
+        None, help="With --ray: a Ray cluster's address (`ray start --head` prints it)."
+    ),
 ) -> None:
     """Render racing-like FPV frames with labelled gate corners.
 
@@ -51,6 +60,8 @@ def gen_dataset_cmd(
     """
     from icarus_vision.dataset import generate_dataset
 
+    if address is not None and not ray:
+        raise ValueError("--address needs --ray")
     columns = (
         TextColumn("[bold]gen-dataset"),
         BarColumn(),
@@ -64,8 +75,9 @@ def gen_dataset_cmd(
         # towards the speed
         progress = progress_reporter(stack, columns)
         result = generate_dataset(
-            recipe, out, num_images, workers, seed, force, progress, renderer=renderer
-        )
+            recipe, out, num_images, workers, seed, force, progress, renderer=renderer,
+            ray=ray, address=address,
+        )  # fmt: skip
     m = result.manifest
     stats = m["stats"]
     splits = ", ".join(f"{k} {v}" for k, v in m["splits"].items())

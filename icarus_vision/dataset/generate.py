@@ -38,7 +38,13 @@ from icarus_vision.dataset.layout import (
     plan_shards,
     split_counts,
 )
-from icarus_vision.dataset.shard import read_valid_shard, write_shard
+from icarus_vision.dataset.shard import (
+    read_valid_shard,
+    render_shard,
+    write_image,
+    write_record,
+    write_shard,
+)
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.render.recipe import Recipe, load_recipe
 from icarus_vision.render.scene import RENDERERS
@@ -164,6 +170,53 @@ def _render(
     return records, rss
 
 
+def _ray_shard(job: Job) -> tuple[list[tuple[str, bytes]], dict, int, float]:
+    """A Ray task: render one shard in memory; the caller writes it (no shared disk needed)."""
+    recipe, seed, spec, _, renderer = job
+    cv2.setNumThreads(1)
+    files: list[tuple[str, bytes]] = []
+    record = render_shard(recipe, seed, spec, lambda name, png: files.append((name, png)), renderer)
+    return files, record, os.getpid(), _peak_rss_mb()
+
+
+def _render_ray(
+    jobs: list[Job], done: int, total: int, progress: ProgressFn | None
+) -> tuple[list[dict], dict[int, float]]:
+    """Render the shards of ``jobs`` as Ray tasks (one core each) and write them here, each
+    shard's images first and its record last, as the local workers do."""
+    import ray
+
+    task = ray.remote(num_cpus=1)(_ray_shard)
+    pending = {task.remote(job): job for job in jobs}
+    records, rss = [], {}
+    try:
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            job = pending.pop(ready[0])
+            files, record, pid, mb = ray.get(ready[0])  # re-raises a task's exception
+            out_dir, spec = job[3], job[2]
+            for name, png in files:
+                write_image(out_dir, name, png)
+            records.append(write_record(out_dir, spec, record))
+            rss[pid] = max(rss.get(pid, 0.0), mb)
+            done += spec.count
+            if progress is not None:
+                progress(min(done, total), total)
+    finally:
+        for ref in pending:  # Ctrl-C or a failed shard: the rest is not needed
+            ray.cancel(ref, force=True)
+    return records, rss
+
+
+def start_ray(address: str | None) -> None:
+    """Connect to the Ray cluster at ``address``, or start Ray on this machine (None)."""
+    import ray
+
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, logging_level="ERROR",
+                 log_to_driver=False)  # fmt: skip
+
+
 def generate_dataset(
     recipe_path: str | os.PathLike,
     out_dir: str | os.PathLike,
@@ -173,6 +226,8 @@ def generate_dataset(
     force: bool = False,
     progress: ProgressFn | None = None,
     renderer: str = "tiny",
+    ray: bool = False,
+    address: str | None = None,
 ) -> GenerationResult:
     """Generate (or resume) a labelled gate-keypoint dataset.
 
@@ -187,6 +242,9 @@ def generate_dataset(
         renderer: ``"tiny"`` (TinyRenderer, CPU) or ``"egl"`` (PyBullet's EGL plugin: OpenGL on
             the GPU, or Mesa's software renderer); recorded in ``manifest.json`` and, when not
             tiny, in ``config.json``: a folder never mixes renderers.
+        ray: render the shards as Ray tasks (``workers`` is then unused: Ray runs one per core
+            of this machine or of the cluster at ``address``); the same files as without.
+        address: with ``ray``, a Ray cluster's address (None: start Ray here).
 
     Returns:
         a :class:`GenerationResult`.
@@ -228,7 +286,12 @@ def generate_dataset(
     if todo:
         mark_incomplete(out)
         jobs = [(recipe, seed, s, out, renderer) for s in todo]
-        records, rss = _render(jobs, workers, done, num_images, progress)
+        if ray:
+            start_ray(address)
+            t_render = time.perf_counter()  # Ray's start-up is not rendering
+            records, rss = _render_ray(jobs, done, num_images, progress)
+        else:
+            records, rss = _render(jobs, workers, done, num_images, progress)
         found.update({r["name"]: r for r in records})
     render_s = time.perf_counter() - t_render
     shard_records = [found[s.name] for s in specs]

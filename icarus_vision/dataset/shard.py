@@ -192,6 +192,47 @@ def record_checksum(record: dict) -> str:
     return "sha256:" + hashlib.sha256(_canonical(body)).hexdigest()
 
 
+def render_shard(
+    recipe: Recipe,
+    seed: int,
+    spec: ShardSpec,
+    on_image: Callable[[str, bytes], None],
+    renderer: str = "tiny",
+) -> dict:
+    """Render a shard: ``on_image(file_name, png)`` for each image in order; returns its record.
+
+    The record is not written: :func:`write_shard` writes as it renders; a Ray task returns the
+    images and the record to the process that writes them (``gen-dataset --ray``).
+    """
+    images, annotations = [], []
+    for s in iter_samples(recipe, seed, spec, renderer):
+        png = encode_png(s.rgb)
+        on_image(image_file_name(s.image_id), png)
+        images.append({**image_dict(s), "sha256": hashlib.sha256(png).hexdigest()})
+        annotations += [annotation_dict(lab, s.image_id) for lab in s.labels]
+    record = {
+        "name": spec.name,
+        "split": spec.split,
+        "first_id": spec.first_id,
+        "count": spec.count,
+        "images": images,
+        "annotations": annotations,
+    }
+    record["checksum"] = record_checksum(record)
+    return record
+
+
+def write_record(out_dir: Path, spec: ShardSpec, record: dict) -> dict:
+    """Write a shard's record (after its images), atomically; returns it as a later run reads it."""
+    data = json.dumps(record, separators=(",", ":"), allow_nan=False).encode()
+    atomic_write_bytes(shard_path(Path(out_dir), spec), data)
+    return json.loads(data)
+
+
+def write_image(out_dir: Path, file_name: str, png: bytes) -> None:
+    atomic_write_bytes(Path(out_dir) / IMAGES / file_name, png)
+
+
 def write_shard(
     recipe: Recipe,
     seed: int,
@@ -209,27 +250,13 @@ def write_shard(
     Returns:
         the shard record.
     """
-    out_dir = Path(out_dir)
-    images, annotations = [], []
-    for s in iter_samples(recipe, seed, spec, renderer):
-        png = encode_png(s.rgb)
-        atomic_write_bytes(out_dir / IMAGES / image_file_name(s.image_id), png)
-        images.append({**image_dict(s), "sha256": hashlib.sha256(png).hexdigest()})
-        annotations += [annotation_dict(lab, s.image_id) for lab in s.labels]
+
+    def on_image(name: str, png: bytes) -> None:
+        write_image(out_dir, name, png)
         if tick is not None:
             tick()
-    record = {
-        "name": spec.name,
-        "split": spec.split,
-        "first_id": spec.first_id,
-        "count": spec.count,
-        "images": images,
-        "annotations": annotations,
-    }
-    record["checksum"] = record_checksum(record)
-    data = json.dumps(record, separators=(",", ":"), allow_nan=False).encode()
-    atomic_write_bytes(shard_path(out_dir, spec), data)
-    return json.loads(data)  # exactly what a later run reads back
+
+    return write_record(out_dir, spec, render_shard(recipe, seed, spec, on_image, renderer))
 
 
 def read_valid_shard(out_dir: Path, spec: ShardSpec) -> dict | None:

@@ -153,6 +153,7 @@ def train_policy(
     progress=None,
     verbose: int = 1,
     max_wall_s: float | None = None,
+    callbacks=None,
 ) -> TrainResult:
     """Train (or resume) a racing policy.
 
@@ -160,6 +161,9 @@ def train_policy(
         timesteps: total environment steps (counting those of a resumed run).
         progress: ``f(timesteps, curriculum)`` called every step.
         max_wall_s: stop (and save) once training has used this much wall-clock time in total.
+        callbacks: ``f(curriculum, elapsed)`` returning more stable-baselines3 callbacks, run after
+            the built-in ones (``elapsed()``: training wall time so far, s; the sweep reports its
+            objective this way).
     """
     import torch
     from stable_baselines3 import PPO
@@ -287,11 +291,13 @@ def train_policy(
                 _save_checkpoint(model, ckpt_dir, snapshot())
             return True
 
+    extra = [] if callbacks is None else list(callbacks(curriculum, metrics.elapsed))
     callbacks = [curriculum, metrics, Periodic()]
     if cfg.init is not None and cfg.init_critic_steps > 0:
         callbacks.append(CriticWarmup(cfg.init_critic_steps))
     if p.advantage_norm == "running":
         callbacks.append(RunningAdvantageNorm())
+    callbacks += extra
     remaining = max(total - int(model.num_timesteps), 0) if resume else total
     try:
         if remaining > 0:

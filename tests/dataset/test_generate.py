@@ -38,6 +38,24 @@ def test_same_recipe_and_seed_give_byte_identical_files(reference, tiny_recipe, 
     assert files_of(serial.out_dir) == files_of(ref)
 
 
+@pytest.mark.slow
+def test_ray_tasks_write_the_same_bytes_and_resume(ray_here, reference, tiny_recipe, tmp_path):
+    ref, _ = reference
+    out = tmp_path / "ray"
+    with pytest.raises(KeyboardInterrupt):  # Ctrl-C once two shards are written
+        generate_dataset(tiny_recipe, out, TINY_IMAGES, seed=3, ray=True,
+                         progress=_interrupt_after(8))  # fmt: skip
+    _assert_nothing_looks_complete(out, tiny_recipe)
+    result = generate_dataset(tiny_recipe, out, TINY_IMAGES, seed=3, ray=True)
+    assert len(result.reused) >= 2 and set(result.reused) | set(result.generated) == set(SHARDS)
+    assert files_of(out) == files_of(ref)
+    damaged = out / "images/000005.png"  # a damaged shard is rendered again, alone
+    damaged.write_bytes(damaged.read_bytes()[:100])
+    result = generate_dataset(tiny_recipe, out, TINY_IMAGES, seed=3, ray=True)
+    assert result.generated == ("train-0001",)
+    assert files_of(out) == files_of(ref)
+
+
 def test_another_seed_gives_other_images(tiny_recipe, tmp_path):
     a = generate_dataset(tiny_recipe, tmp_path / "a", 4, workers=1, seed=0)
     b = generate_dataset(tiny_recipe, tmp_path / "b", 4, workers=1, seed=1)
