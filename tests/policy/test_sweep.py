@@ -116,16 +116,20 @@ def test_two_trials_one_failing(ray_here, tmp_path):
 "init" = "classic"
 """)  # fmt: skip
     out = tmp_path / "sweep"
-    state = run_sweep(path, out, trials=2, trial_minutes=0.05, reports=1, seed=0)
-    status = sorted(t["status"] for t in state.trials.values())
-    assert status == ["done", "failed"], state.trials
-    failed = next(t for t in state.trials.values() if t["status"] == "failed")
+    res = CliRunner().invoke(app, ["sweep", "--space", str(path), "--out", str(out), "--trials",
+                                   "2", "--trial-minutes", "0.05", "--reports", "1"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "best trial" in res.output and "1 done" in res.output and "1 failed" in res.output
+    trials = json.loads((out / "trials.json").read_text())["trials"]
+    status = sorted(t["status"] for t in trials.values())
+    assert status == ["done", "failed"], trials
+    failed = next(t for t in trials.values() if t["status"] == "failed")
     assert "none-such-policy.safetensors" in failed["error"]
     with (out / "results.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 2 and {r["status"] for r in rows} == {"done", "failed"}
     assert all(r["ppo.learning_rate"] for r in rows)
-    done = next(t for t in state.trials.values() if t["status"] == "done")
+    done = next(t for t in trials.values() if t["status"] == "done")
     run = out / "trials" / done["id"]
     assert (run / "policy.safetensors").is_file() and (run / "tb").is_dir()
     cfg = load_train_config(out / "best.toml")  # train-policy --config reads it as it is

@@ -16,6 +16,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ray.tune import Callback
+
 from icarus_vision.fileio import atomic_write_json
 from icarus_vision.policy.sweep.report import write_results
 from icarus_vision.policy.sweep.space import SearchSpace, encode_point, load_space, to_tune
@@ -45,50 +47,67 @@ class SweepState:
         return max(scored, key=lambda t: t["objective"]) if scored else None
 
 
-def _callback(state: SweepState, out: Path, space: SearchSpace, update: Callable | None):
-    from ray.tune import Callback
+def _record(state: SweepState, space: SearchSpace, trial, status=None, error=None) -> None:
+    """Update the state's entry of ``trial`` from its last result."""
+    r = trial.last_result or {}
+    t = state.trials.setdefault(trial.trial_id, {"id": trial.trial_id, "status": "running"})
+    t["params"] = {k: v for k, v in trial.config.items() if k in space.search}
+    if "objective" in r:
+        t.update({k: r.get(k) for k in ("objective", "success", "lap_per_gate_s", "stage",
+                                        "timesteps", "minutes")})  # fmt: skip
+        t["final"] = bool(r.get("final"))
+    if status is not None:
+        t["status"] = status
+        t["ended"] = time.time()
+    if error is not None:
+        t["error"] = error
 
-    def record(trial, status: str | None = None, error: str | None = None) -> None:
-        r = trial.last_result or {}
-        t = state.trials.setdefault(trial.trial_id, {"id": trial.trial_id, "status": "running"})
-        t["params"] = {k: v for k, v in trial.config.items() if k in space.search}
-        if "objective" in r:
-            t.update({k: r.get(k) for k in ("objective", "success", "lap_per_gate_s", "stage",
-                                            "timesteps", "minutes")})  # fmt: skip
-            t["final"] = bool(r.get("final"))
-        if status is not None:
-            t["status"] = status
-            t["ended"] = time.time()
-        if error is not None:
-            t["error"] = error
 
-    class Progress(Callback):
-        def _changed(self) -> None:
-            atomic_write_json(out / TRIALS, {"started": state.started, "trials": state.trials})
-            if update is not None:
-                update(state)
+class ProgressCallback(Callback):
+    """Runs in the sweep's process: keeps ``state``, the result files and the view current."""
 
-        def on_trial_start(self, iteration, trials, trial, **info):
-            record(trial, "running")
-            state.trials[trial.trial_id].setdefault("began", time.time())
+    def __init__(self, state: SweepState, out: Path, space: SearchSpace, update) -> None:
+        self.state, self.out, self.space, self.update = state, out, space, update
+
+    def __getstate__(self) -> dict:
+        return {}  # Tune pickles its run config; this process's view does not travel with it
+
+    def __setstate__(self, d: dict) -> None:
+        self.state = self.out = self.space = self.update = None  # inert until replaced
+
+    def _changed(self) -> None:
+        if self.state is None:
+            return
+        atomic_write_json(
+            self.out / TRIALS, {"started": self.state.started, "trials": self.state.trials}
+        )
+        if self.update is not None:
+            self.update(self.state)
+
+    def _ended(self, trial, status: str, error: str | None = None) -> None:
+        if self.state is None:
+            return
+        _record(self.state, self.space, trial, status, error)
+        write_results(self.out, self.space, self.state)
+        self._changed()
+
+    def on_trial_start(self, iteration, trials, trial, **info):
+        if self.state is not None:
+            _record(self.state, self.space, trial, "running")
+            self.state.trials[trial.trial_id].setdefault("began", time.time())
             self._changed()
 
-        def on_trial_result(self, iteration, trials, trial, result, **info):
-            record(trial)
+    def on_trial_result(self, iteration, trials, trial, result, **info):
+        if self.state is not None:
+            _record(self.state, self.space, trial)
             self._changed()
 
-        def on_trial_complete(self, iteration, trials, trial, **info):
-            done = bool((trial.last_result or {}).get("final"))
-            record(trial, "done" if done else "stopped early")
-            write_results(out, space, state)
-            self._changed()
+    def on_trial_complete(self, iteration, trials, trial, **info):
+        done = bool((trial.last_result or {}).get("final"))
+        self._ended(trial, "done" if done else "stopped early")
 
-        def on_trial_error(self, iteration, trials, trial, **info):
-            record(trial, "failed", error=_error_line(trial))
-            write_results(out, space, state)
-            self._changed()
-
-    return Progress()
+    def on_trial_error(self, iteration, trials, trial, **info):
+        self._ended(trial, "failed", _error_line(trial))
 
 
 def _error_line(trial) -> str:
@@ -137,11 +156,13 @@ def run_sweep(
         seed: Optuna's sampler seed and every trial's training seed.
         update: called with the state whenever a trial starts, reports or ends (progress view).
     """
+    import optuna
     import ray
     from ray import tune
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
 
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
     out = Path(out).resolve()
     _check_folder(out, resume)
     if resume:
@@ -176,7 +197,7 @@ def run_sweep(
         storage_path=str(out),
         verbose=0,
         failure_config=tune.FailureConfig(max_failures=0, fail_fast=False),
-        callbacks=[_callback(state, out, space, update)],
+        callbacks=[ProgressCallback(state, out, space, update)],
     )
     if resume:
         tuner = tune.Tuner.restore(str(out / "tune"), trainable, resume_unfinished=True,
