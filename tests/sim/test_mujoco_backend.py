@@ -15,8 +15,8 @@ import pytest
 from icarus_vision.racing.runner import run_race
 from icarus_vision.sim.builtin import BUILTIN_TRACKS, builtin_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
-from icarus_vision.sim.mujoco_backend import MuJoCoDroneRacingEnv, model_xml, rate_gain
 from icarus_vision.sim.dynamics import QuadState
+from icarus_vision.sim.mujoco_backend import MuJoCoDroneRacingEnv, model_xml, rate_gain
 from icarus_vision.sim.quad import QuadParams
 from icarus_vision.sim.registration import make_env
 
