@@ -71,6 +71,7 @@ class GateEstimator:
         self._last_passed = -1
         self._passed: set[int] = set()
         self._odom: OdometryReading | None = None
+        self._latest: OdometryReading | None = None  # the newest reading (passages)
         self._r_wb = np.eye(3)  # attitude of the latest odometry reading, body -> world
         self._rejected: deque = deque()
         if self.prior is not None:
@@ -128,8 +129,13 @@ class GateEstimator:
             q_dt = np.diag(self._q * dt)
             for tr in self.tracks:
                 tr.add_noise(q_dt)
-        if prev is not None:
-            self._check_passage(prev.pos, odom.pos)
+        # Passages are checked along time only: an update at an older image's pose (latency)
+        # must not look like flying back through the gate just passed (a hairpin's next passage).
+        last = self._latest
+        if last is None or odom.t > last.t:
+            if last is not None:
+                self._check_passage(last.pos, odom.pos)
+            self._latest = odom
         self._odom = odom
         self._r_wb = quat_to_rot(odom.quat[None] / np.linalg.norm(odom.quat))[0]
         if self.config.mode == "map-free":

@@ -106,6 +106,24 @@ def test_switches_gate_on_passage(two_gates):
     )
 
 
+def test_a_late_image_does_not_pass_a_hairpin_gate_backwards():
+    """Hairpin: the gate just passed is the next passage, the other way. An image taken before the
+    passage, fused after it (latency), moves the estimator back in time through that plane: it
+    must not count as flying through the gate again."""
+    g = Gate((5.0, 0.0, 2.0))
+    hairpin = Track("hp", (g, Gate(g.pos, yaw_deg=180.0), Gate((-1.0, 4.0, 2.0), yaw_deg=135.0)))
+    est = GateEstimator(CAM, EstimatorConfig(), hairpin)
+    est.predict(odom_at(0.00, (4.6, 0, 2)))
+    est.predict(odom_at(0.02, (5.2, 0, 2)))  # through gate 0 along +x
+    assert est.target == 1
+    est.update(odom_at(0.00, (4.6, 0, 2)), [])  # the image of t = 0, one frame late
+    est.predict(odom_at(0.04, (5.6, 0, 2)))
+    assert est.target == 1 and est.counts["passages"] == 1
+    est.predict(odom_at(0.50, (5.6, 0.1, 2), yaw=np.pi))
+    est.predict(odom_at(0.52, (4.8, 0.1, 2), yaw=np.pi))  # back through it along -x
+    assert est.target == 2
+
+
 def test_map_free_finds_the_gate_ahead(two_gates):
     est = GateEstimator(CAM, EstimatorConfig(mode="map-free"))
     oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
