@@ -135,6 +135,7 @@ def test_two_trials_one_failing(ray_here, tmp_path):
     cfg = load_train_config(out / "best.toml")  # train-policy --config reads it as it is
     assert cfg.init == "classic" and cfg.ppo.num_envs == 16
     assert (out / "objective.png").read_bytes()[:4] == b"\x89PNG"
+    assert "ended" not in rows[0]  # a plotting field, not a column
     # a second sweep into the same folder is refused without --resume
     with pytest.raises(ValueError, match="holds a sweep; pass --resume"):
         run_sweep(path, out, trials=2, trial_minutes=0.05)

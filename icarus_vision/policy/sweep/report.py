@@ -21,7 +21,7 @@ COLUMNS = ("trial", "status", "objective", "success", "lap_per_gate_s", "stage",
 def _rows(space: SearchSpace, state) -> list[dict]:
     rows = []
     for t in sorted(state.trials.values(), key=lambda t: t.get("began", math.inf)):
-        row = {"trial": t["id"], "status": t["status"]}
+        row = {"trial": t["id"], "status": t["status"], "ended": t.get("ended")}
         row.update({k: t.get(k) for k in COLUMNS[2:]})
         row.update(decode(space, t.get("params", {})))
         rows.append(row)
