@@ -54,7 +54,7 @@ def test_video_frames_are_written_and_decode(tmp_path):
     "kwargs, match",
     [
         ({"detector": "lidar"}, "lidar"),
-        ({"backend": "mujoco"}, "unknown backend"),
+        ({"backend": "ode"}, "unknown backend"),
         (
             {"policy": "missing_policy.safetensors"},
             "missing_policy.safetensors: policy file not found",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import warnings
 from pathlib import Path
 
 from icarus_vision.fileio import atomic_path, atomic_write_text
@@ -134,8 +135,10 @@ def parameter_importances(space: SearchSpace, state) -> dict[str, float] | None:
     study = optuna.create_study(direction="maximize")
     study.add_trials(trials)
     try:
-        evaluator = optuna.importance.PedAnovaImportanceEvaluator()
-        return optuna.importance.get_param_importances(study, evaluator=evaluator)
+        with warnings.catch_warnings():  # with few trials PED-ANOVA warns that all are equal
+            warnings.simplefilter("ignore", UserWarning)
+            evaluator = optuna.importance.PedAnovaImportanceEvaluator()
+            return optuna.importance.get_param_importances(study, evaluator=evaluator)
     except (RuntimeError, ValueError):  # e.g. every objective equal
         return None
 
@@ -144,7 +147,7 @@ def _plot_importance(path: Path, space: SearchSpace, state) -> None:
     from matplotlib.figure import Figure
 
     imp = parameter_importances(space, state)
-    fig = Figure(figsize=(6, 0.5 + 0.4 * len(space.search)), dpi=100)
+    fig = Figure(figsize=(6, max(2.0, 0.5 + 0.4 * len(space.search))), dpi=100)
     ax = fig.subplots()
     if imp:
         names = list(imp)[::-1]
