@@ -123,6 +123,10 @@ class TrainConfig:
     time_cost: float = 0.0
     """Cost per second of flight added to the reward preset's (≥ 0; e.g. 2.0 makes every second
     cost as much as 2 m of progress), so a policy values lap time beyond the discount."""
+    perception_cost: float | None = None
+    """Cost per radian, every step, that the next gate lies outside the free cone around the
+    camera's axis (≥ 0; None: the reward preset's, 0.05 for racing-line), so the policy keeps
+    the gate in view at the price of some speed."""
     observation: str = "basic"
     """"basic" (15-D) or "extended" (21-D: adds the next gate's direction and the gate after)."""
     max_episode_s: float | None = None
@@ -152,7 +156,11 @@ class TrainConfig:
             base = RACING_LINE_REWARD
         else:
             base = RewardConfig(speed=0.5, time=-1.0)
-        return replace(base, time=base.time - self.time_cost) if self.time_cost else base
+        if self.time_cost:
+            base = replace(base, time=base.time - self.time_cost)
+        if self.perception_cost is not None:
+            base = replace(base, perception=-self.perception_cost)
+        return base
 
 
 def validate_train_config(c: TrainConfig) -> None:
@@ -194,6 +202,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("eval_episodes", c.eval_episodes >= 1),
         ("init_critic_steps", c.init_critic_steps >= 0),
         ("time_cost", c.time_cost >= 0),
+        ("perception_cost", c.perception_cost is None or c.perception_cost >= 0),
         ("randomization.mass_pct", 0 <= c.randomization.mass_pct < 1),
         ("randomization.thrust_pct", 0 <= c.randomization.thrust_pct < 1),
         ("randomization.motor_tau_pct", 0 <= c.randomization.motor_tau_pct < 1),

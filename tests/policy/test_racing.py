@@ -165,3 +165,10 @@ def test_time_cost_adds_to_the_presets_time_weight():
     assert replace(SPECIALIST, time_cost=0.0).reward_config() == RACING_LINE_REWARD
     with pytest.raises(ValueError, match="time_cost"):
         config_from_dict({"time_cost": -1.0})
+
+
+def test_perception_cost_replaces_the_presets_weight():
+    assert SPECIALIST.reward_config().perception == RACING_LINE_REWARD.perception == -0.05
+    assert replace(SPECIALIST, perception_cost=0.5).reward_config().perception == -0.5
+    with pytest.raises(ValueError, match="perception_cost"):
+        config_from_dict({"perception_cost": -0.1})
