@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/race_policy.py builtin [--seeds 20] [--detector cnn]
         [--policy default] [--backend pybullet] [--json PATH]
     .venv/bin/python benchmarks/race_policy.py specialists [--seeds 20] [--json PATH]
-    .venv/bin/python benchmarks/race_policy.py vision [--tracks 60] [--difficulty 1.0] [--json PATH]
+    .venv/bin/python benchmarks/race_policy.py vision [--tracks 60] [--difficulty 1.0]
+        [--policy default] [--json PATH]
 
 ``builtin``: every built-in track, `race --randomize --detector cnn --policy default` (the
 generalist; ``--policy auto`` flies the shipped specialists where there are some) on
@@ -77,16 +78,14 @@ def specialists(seeds: int) -> dict:
     return out
 
 
-def vision(tracks: int, difficulty: float) -> dict:
+def vision(tracks: int, difficulty: float, policy: str = "default") -> dict:
     out = {}
     for det in ("oracle", "cnn"):
         reports = []
         for i in range(tracks):
             track = race_track(10, 3000 + i, difficulty=difficulty)
             reports.append(
-                run_race(
-                    track, detector=det, policy="default", seed=SEED0 + i, randomize=True
-                ).report
+                run_race(track, detector=det, policy=policy, seed=SEED0 + i, randomize=True).report
             )
         out[det] = _summary(reports)
         print(det, out[det], flush=True)
@@ -101,7 +100,8 @@ def main() -> None:
     ap.add_argument("--tracks", type=int, default=60)
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--detector", default="cnn")
-    ap.add_argument("--policy", default="default", help="builtin: default or auto")
+    ap.add_argument("--policy", default="default",
+                    help="builtin: default or auto; vision: default or an exported policy")  # fmt: skip
     ap.add_argument("--backend", default="pybullet", help="builtin: the physics backend")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
@@ -112,7 +112,7 @@ def main() -> None:
     elif args.what == "specialists":
         out = specialists(args.seeds)
     else:
-        out = vision(args.tracks, args.difficulty)
+        out = vision(args.tracks, args.difficulty, args.policy)
     out["wall_s"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(out, indent=1))
     if args.json:
