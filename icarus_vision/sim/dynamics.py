@@ -222,6 +222,12 @@ def drag_force(rot: np.ndarray, vel: np.ndarray, wind: np.ndarray, drag: np.ndar
     return np.matmul(rot, (air_b * -drag[:, None, :]).transpose(0, 2, 1))[:, :, 0]
 
 
+def gyro_torque(inertia: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """ω × Jω (N, 3), body frame, for a diagonal J (3,) and body rates ω (N, 3): the torque a rate
+    controller adds so that the rates follow its command alone."""
+    return (inertia[_C2] - inertia[_C1]) * omega[:, _C1] * omega[:, _C2]
+
+
 def body_wrench(
     state: QuadState,
     thrust_cmd: np.ndarray,
@@ -245,9 +251,7 @@ def body_wrench(
     rot = quat_to_rot(state.quat) if rot is None else rot
     force = rot[:, :, 2] * thrust[:, None] + drag_force(rot, state.vel, wind, params.drag)
     j, w = params.inertia, state.omega
-    # ω × Jω for a diagonal J: ((Jz − Jy) ωy ωz, (Jx − Jz) ωz ωx, (Jy − Jx) ωx ωy)
-    gyro = (j[_C2] - j[_C1]) * w[:, _C1] * w[:, _C2]
-    torque = j * (rate_cmd - w) * (k / dt)[:, None] + gyro
+    torque = j * (rate_cmd - w) * (k / dt)[:, None] + gyro_torque(j, w)
     return thrust, force, np.matmul(rot, torque[:, :, None])[:, :, 0]
 
 

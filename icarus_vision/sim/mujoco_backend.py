@@ -29,7 +29,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from icarus_vision.sim.dynamics import QuadState
+from icarus_vision.sim.dynamics import QuadState, drag_force, gyro_torque, lag_gain
 from icarus_vision.sim.env import DroneRacingEnv
 from icarus_vision.sim.pybullet_backend import CONTACT_TOL, GATE_RGBA, GROUND_RGBA, gate_bar_boxes
 from icarus_vision.sim.quad import GRAVITY, QuadParams
@@ -43,7 +43,7 @@ def rate_gain(inertia: np.ndarray, tau: float, dt: float) -> np.ndarray:
     """Gain (3,) of the proportional rate loop τ = g (ω_c − ω) whose response, as MuJoCo's implicit
     integrator steps it, is the first-order lag ``tau``: each step closes the same fraction
     k = 1 − exp(−dt/τ) of the error as the exact lag (g = J k / (dt (1 − k)); J/τ as dt → 0)."""
-    k = 1.0 - np.exp(-dt / tau)
+    k = lag_gain(dt, tau)
     return np.asarray(inertia, float) * k / (dt * (1.0 - k))
 
 
@@ -163,14 +163,13 @@ class MuJoCoDroneRacingEnv(DroneRacingEnv):
         d.ctrl[1:4] = rate_cmd[0]
         trail = np.empty((self.config.substeps, 1, 3))
         frame_hit = ground_hit = False
-        drag, air0 = params.drag[0], wind[0]
-        jz_jy, jx_jz, jy_jx = params.inertia[[2, 0, 1]] - params.inertia[[1, 2, 0]]
+        drag, air, j = params.drag[:1], wind[:1], params.inertia
         wrench = d.xfrc_applied[self._body]
+        rot = self._rot[None]  # a view: _read_state updates it in place
         for k in range(self.config.substeps):
-            rot, (wx, wy, wz) = self._rot, d.qvel[3:6]
-            wrench[:3] = rot @ (-drag * ((d.qvel[:3] - air0) @ rot))  # drag on the airspeed
-            # the rate controller's gyroscopic feed-forward ω × Jω (diagonal J)
-            wrench[3:] = rot @ (jz_jy * wy * wz, jx_jz * wz * wx, jy_jx * wx * wy)
+            wrench[:3] = drag_force(rot, d.qvel[None, :3], air, drag)[0]
+            # the rate controller's gyroscopic feed-forward
+            wrench[3:] = self._rot @ gyro_torque(j, d.qvel[None, 3:6])[0]
             mujoco.mj_step(m, d)
             self._read_state()
             trail[k, 0] = d.qpos[:3]
