@@ -38,7 +38,7 @@ def _digest(folder: Path) -> str:
 
 def dataset(num_images: int, runs: int) -> dict:
     from icarus_vision.dataset import generate_dataset
-    from icarus_vision.dataset.generate import start_ray
+    from icarus_vision.ray_runtime import start_ray
 
     start_ray(None)
     rates = {"workers": [], "ray": []}
@@ -117,7 +117,6 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=3.0)
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
-    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     out = dataset(args.num_images, args.runs) if args.what == "dataset" else sweep(args.minutes)
     out["cpus"] = os.cpu_count()
     print(json.dumps(out, indent=1))

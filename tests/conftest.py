@@ -31,11 +31,10 @@ def make(backend):
 def ray_here():
     """Ray started once per test session on this machine (sweep and gen-dataset --ray reuse a
     running Ray instead of starting their own)."""
-    import os
-
     import ray
 
-    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
+    from icarus_vision.ray_runtime import start_ray
+
+    start_ray(num_cpus=2)
     yield
     ray.shutdown()

@@ -66,9 +66,6 @@ def sweep_cmd(
     config (train-policy --config accepts it), objective.png and importance.png show the sweep.
     Ctrl-C stops it; --resume continues it.
     """
-    import os
-
-    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")  # our view, not Tune's tables
     from icarus_vision.policy.sweep import run_sweep
 
     if not resume and space is None:

@@ -46,6 +46,7 @@ from icarus_vision.dataset.shard import (
     write_shard,
 )
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
+from icarus_vision.ray_runtime import start_ray
 from icarus_vision.render.recipe import Recipe, load_recipe
 from icarus_vision.render.scene import RENDERERS
 
@@ -206,15 +207,6 @@ def _render_ray(
         for ref in pending:  # Ctrl-C or a failed shard: the rest is not needed
             ray.cancel(ref, force=True)
     return records, rss
-
-
-def start_ray(address: str | None) -> None:
-    """Connect to the Ray cluster at ``address``, or start Ray on this machine (None)."""
-    import ray
-
-    if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, logging_level="ERROR",
-                 log_to_driver=False)  # fmt: skip
 
 
 def generate_dataset(

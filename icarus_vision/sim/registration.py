@@ -77,15 +77,14 @@ def resolve_backend(name: str) -> Callable:
     if name in _registered:
         factory = _registered[name]
         return _load(factory) if isinstance(factory, str) else factory
+    check_backend(name)  # what is left is an installed plug-in, or nothing
     installed = _installed()
-    if name in installed:
-        try:
-            return installed[name].load()
-        except Exception as e:  # a broken plug-in names itself rather than failing obscurely
-            raise ValueError(
-                f"backend {name!r} (entry point {installed[name].value}) failed to load: {e}"
-            ) from e
-    raise ValueError(f"unknown backend {name!r}; choose one of {', '.join(backend_names())}")
+    try:
+        return installed[name].load()
+    except Exception as e:  # a broken plug-in names itself rather than failing obscurely
+        raise ValueError(
+            f"backend {name!r} (entry point {installed[name].value}) failed to load: {e}"
+        ) from e
 
 
 def check_backend(name: str) -> str:

@@ -38,13 +38,6 @@ def _csv(rows: list[dict], params: list[str]) -> str:
     return buf.getvalue()
 
 
-def best_trial(state) -> dict | None:
-    """The finished or early-stopped trial with the highest objective (failed ones never)."""
-    scored = [t for t in state.trials.values()
-              if t.get("objective") is not None and t["status"] != "failed"]  # fmt: skip
-    return max(scored, key=lambda t: t["objective"]) if scored else None
-
-
 def write_results(out: Path, space: SearchSpace, state) -> None:
     """Rewrite results.csv, best.toml and the plots from ``state`` (atomically, each file)."""
     import tomli_w
@@ -52,7 +45,7 @@ def write_results(out: Path, space: SearchSpace, state) -> None:
     rows = _rows(space, state)
     params = list(space.search)
     atomic_write_text(out / RESULTS, _csv(rows, params))
-    best = best_trial(state)
+    best = state.best()
     if best is not None:
         cfg = best_config_dict(space, decode(space, best["params"]))
         head = (f"# best trial {best['id']} of the sweep in {out.name}/: objective "

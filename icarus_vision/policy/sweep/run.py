@@ -22,6 +22,7 @@ from icarus_vision.fileio import atomic_write_json
 from icarus_vision.policy.sweep.report import write_results
 from icarus_vision.policy.sweep.space import SearchSpace, encode_point, load_space, to_tune
 from icarus_vision.policy.sweep.trial import run_trial
+from icarus_vision.ray_runtime import start_ray
 
 SETTINGS = "sweep.json"
 SPACE = "space.toml"
@@ -43,7 +44,9 @@ class SweepState:
         return sum(t["status"] == status for t in self.trials.values())
 
     def best(self) -> dict | None:
-        scored = [t for t in self.trials.values() if t.get("objective") is not None]
+        """The done or early-stopped trial with the highest objective (a failed one never)."""
+        scored = [t for t in self.trials.values()
+                  if t.get("objective") is not None and t["status"] != "failed"]  # fmt: skip
         return max(scored, key=lambda t: t["objective"]) if scored else None
 
 
@@ -157,7 +160,6 @@ def run_sweep(
         update: called with the state whenever a trial starts, reports or ends (progress view).
     """
     import optuna
-    import ray
     from ray import tune
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
@@ -183,9 +185,7 @@ def run_sweep(
     if resume and (out / TRIALS).is_file():
         saved = json.loads((out / TRIALS).read_text())
         state.started, state.trials = saved["started"], saved["trials"]
-    if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, log_to_driver=False,
-                 logging_level="ERROR", configure_logging=True)  # fmt: skip
+    start_ray(address)
     trainable = tune.with_resources(
         tune.with_parameters(
             run_trial, space=space, out=str(out), minutes=trial_minutes, reports=reports, seed=seed

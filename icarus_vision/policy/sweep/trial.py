@@ -8,7 +8,6 @@ way (and at the end) it evaluates the current policy on the objective's random t
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -103,7 +102,6 @@ def run_trial(params: dict, *, space: SearchSpace, out: str, minutes: float, rep
         made.append(factory(curriculum, elapsed))
         return made
 
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     train_policy(cfg, trial_dir, seed=seed, resume=resume, max_wall_s=budget_s,
                  callbacks=callbacks, verbose=0, timesteps=10**12)  # fmt: skip
     cb = made[0]
