@@ -1,8 +1,8 @@
 """Fly one race with the whole pipeline in the loop and build its report.
 
-``run_race`` resolves the track, quadrotor, detector and pilot, builds the physics
-backend's world and the rendering scene, flies ``fly_loop`` and returns the report of ARCHITECTURE.md with
-the trajectory and, when asked, the video frames.
+``run_race`` resolves the track, quadrotor, detector and pilot, builds the physics backend's
+world and the rendering scene, flies ``fly_loop`` and returns the report of ARCHITECTURE.md with the
+trajectory and, when asked, the video frames.
 """
 
 from __future__ import annotations
