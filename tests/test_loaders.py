@@ -43,7 +43,8 @@ TRACK = st.fixed_dictionaries(
 QUAD_KEYS = ["name", "mass", "inertia", "arm_length", "thrust_to_weight", "max_rate", "motor_tau",
              "drag", "radius", "camera"]  # fmt: skip
 CONFIG_KEYS = ["preset", "total_timesteps", "ppo", "curriculum", "randomization", "perception",
-               "reward", "observation", "max_episode_s", "track", "init", "time_cost"]  # fmt: skip
+               "reward", "observation", "max_episode_s", "track", "init", "time_cost",
+               "perception_cost"]  # fmt: skip
 
 
 @settings(max_examples=300, deadline=None)
