@@ -71,6 +71,7 @@ from icarus_vision.commands import eval_detector as _eval_detector  # noqa: E402
 from icarus_vision.commands import eval_estimator as _eval_estimator  # noqa: E402,F401
 from icarus_vision.commands import eval_policy as _eval_policy  # noqa: E402,F401
 from icarus_vision.commands import gen_dataset as _gen_dataset  # noqa: E402,F401
+from icarus_vision.commands import import_gates as _import_gates  # noqa: E402,F401
 from icarus_vision.commands import plan as _plan  # noqa: E402,F401
 from icarus_vision.commands import quantize_detector as _quantize_detector  # noqa: E402,F401
 from icarus_vision.commands import race as _race  # noqa: E402,F401

@@ -26,11 +26,14 @@ def _span(b: dict) -> str:
 
 def _table(title: str, first: str, rows: list[dict]) -> Table:
     table = Table(title=title)
-    for col in (first, "gates", "precision", "recall", "median px", "PCK@2", "PCK@5"):
+    for col in (first, "gates", "false pos.", "precision", "recall", "median px", "% of side",
+                "PCK@2", "PCK@5"):  # fmt: skip
         table.add_column(col, justify="right")
     for b in rows:
-        table.add_row(_span(b), str(b["gates"]), _fmt(b["precision"]), _fmt(b["recall"]),
-                      _fmt(b["corner_error_px"]["median"]), _fmt(b["pck"]["2px"]),
+        rel = b["corner_error_side"]["median"]
+        table.add_row(_span(b), str(b["gates"]), str(b["false_positives"]), _fmt(b["precision"]),
+                      _fmt(b["recall"]), _fmt(b["corner_error_px"]["median"]),
+                      "-" if rel is None else f"{100 * rel:.1f}", _fmt(b["pck"]["2px"]),
                       _fmt(b["pck"]["5px"]))  # fmt: skip
     return table
 
@@ -38,7 +41,12 @@ def _table(title: str, first: str, rows: list[dict]) -> Table:
 @app.command("eval-detector")
 @user_errors
 def eval_detector_cmd(
-    data: Path = typer.Option(..., help="gen-dataset output folder (its --split is used)."),
+    data: Path = typer.Option(
+        ...,
+        help="gen-dataset output folder (its --split is used), a COCO-keypoints folder (one "
+        "annotation file and images/, e.g. from import-gates: real images), or a folder of "
+        "images without gates (counts false positives).",
+    ),
     detector: str = typer.Option("cnn", help="cnn (shipped), cnn:PATH (checkpoint) or opencv."),
     json_path: Path = typer.Option(None, "--json", help="Write the report to this JSON file."),
     error_model: Path = typer.Option(
@@ -61,12 +69,14 @@ def eval_detector_cmd(
         None, help="cnn only: what runs its networks: auto (default), int8, onnxruntime or torch."
     ),
 ) -> None:
-    """Precision, recall, corner error, PCK and ms/frame (one core), overall and by distance/size,
-    with 95 % confidence intervals (bootstrap over the images), on a dataset's test split (or
-    --split val).
+    """Precision, recall, corner error (pixels and % of the gate's side), PCK and ms/frame (one
+    core), overall and by distance/size, with 95 % confidence intervals (bootstrap over the
+    images), on a dataset's test split (or --split val), on real labelled images (a COCO folder:
+    by size only), or on images without gates.
 
-    Also writes the detector's error model (gate-centre error and miss rate by distance) for
-    `train-policy`'s perception noise.
+    Images of any size and aspect are read whole (letterboxed to the network's input, not
+    stretched). Also writes the detector's error model (gate-centre error and miss rate by
+    distance) for `train-policy`'s perception noise, where the data has distances.
     """
     from icarus_vision.fileio import check_output
     from icarus_vision.gate_detect.evaluate import eval_detector
@@ -82,11 +92,11 @@ def eval_detector_cmd(
                           progress=progress, examples_path=examples,
                           examples=num_examples, seed=seed, resamples=resamples,
                           backend=backend)  # fmt: skip
-    title = (f"{r['detector']} on {r['images']} {r['split']} images, {r['gates']} gates >= "
+    split_name = f"{r['split']} " if r["has_distance"] else ""
+    title = (f"{r['detector']} on {r['images']} {split_name}images, {r['gates']} gates >= "
              f"{r['min_gate_px']:g} px")  # fmt: skip
-    console.print(
-        _table(title, "distance m", [{"min": "all", "max": None, **r}, *r["by_distance"]])
-    )
+    rows = [{"min": "all", "max": None, **r}, *(r["by_distance"] if r["has_distance"] else [])]
+    console.print(_table(title, "distance m" if r["has_distance"] else "", rows))
     # the report has every size; below min_gate_px no false positive is counted (the rule)
     sizes = [b for b in r["by_size"] if b["max"] is None or b["max"] > r["min_gate_px"]]
     console.print(_table("by apparent size (mean side of the opening)", "size px", sizes))

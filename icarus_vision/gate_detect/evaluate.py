@@ -17,7 +17,7 @@ import numpy as np
 
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.gate_detect.cnn import cpu_description
-from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.cnn.data import load_eval_set, read_rgb
 from icarus_vision.gate_detect.draw import draw_detections, sheet
 from icarus_vision.gate_detect.error_model import build_error_model, gate_error, viewing_angle_deg
 from icarus_vision.gate_detect.metrics import (
@@ -65,10 +65,12 @@ def eval_detector(
     resamples: int = 1000,
     backend: str | None = None,
 ) -> dict:
-    """Evaluate a detector on a gen-dataset split.
+    """Evaluate a detector on a gen-dataset split, a COCO-keypoints folder (e.g. real images
+    from ``import-gates``; breakdowns by apparent size only, no error model) or a folder of
+    images without gates (:func:`~icarus_vision.gate_detect.cnn.data.load_eval_set`).
 
     Args:
-        data_dir: gen-dataset output folder.
+        data_dir: gen-dataset output folder, COCO-keypoints folder or folder of images.
         detector_spec: ``cnn``, ``cnn:PATH`` or ``opencv``.
         json_path: also write the report here.
         error_model_path: write the error model here (default: beside ``json_path`` as
@@ -104,7 +106,7 @@ def eval_detector(
     if ext is not None and not cv2.haveImageWriter(f"examples{ext}"):
         raise ValueError(f"{examples_path}: cannot write an image of this type (use .jpg or .png)")
     detector = make_detector(detector_spec, **({} if backend is None else {"backend": backend}))
-    data = load_split(data_dir, split, None, limit)
+    data = load_eval_set(data_dir, split, limit)
     gts, preds, samples, times, tiles, per_image = [], [], [], [], [], []
     n = len(data.files)
     shown = set(np.linspace(0, n - 1, min(examples, n)).round().astype(int).tolist())
@@ -114,14 +116,15 @@ def eval_detector(
             t0 = time.perf_counter()
             found = detector.detect(image)
             times.append(time.perf_counter() - t0)
-            k = np.asarray(data.image_info[i]["camera"]["K"], float)
+            camera = data.image_info[i].get("camera")
+            k = None if camera is None else np.asarray(camera["K"], float)
             truth = [(g.corners, g.visibility, g.distance) for g in data.gates[i]]
             g_rec, p_rec = evaluate_image([(d.corners, d.score) for d in found], truth, min_gate_px)
             for p in p_rec:
-                if p["distance"] is None and p["side"] > 0:
+                if p["distance"] is None and p["side"] > 0 and k is not None:
                     p["distance"] = k[0, 0] * GATE_SIZE_M / p["side"]
             for g, gate in zip(g_rec, data.gates[i], strict=True):
-                if evaluable(gate.corners, gate.visibility):
+                if evaluable(gate.corners, gate.visibility) and np.isfinite(gate.distance):
                     samples.append(_sample(g, gate, k))
             gts += g_rec
             preds += p_rec
@@ -134,7 +137,9 @@ def eval_detector(
         "detector": detector_spec,
         "backend": getattr(detector, "backend", None),
         "split": split,
+        "data": str(data_dir),
         "images": n,
+        "has_distance": bool(any(np.isfinite(g.distance) for gs in data.gates for g in gs)),
         "min_gate_px": min_gate_px,
         **summarize(gts, preds, min_gate_px),
         "confidence": (

@@ -94,12 +94,17 @@ def summarize(gts: list[dict], preds: list[dict], min_gate_px: float) -> dict:
         min_gate_px: smallest counted gate side.
 
     Returns:
-        gates, precision, recall, corner_error_px {mean, median}, pck {2px, 5px}.
+        gates, precision, recall, false_positives (count), corner_error_px {mean, median},
+        corner_error_side {median} (corner errors as fractions of their gate's mean side),
+        pck {2px, 5px}.
     """
     counted = [g for g in gts if g["evaluable"] and g["side"] >= min_gate_px]
     tp = sum(p["status"] == "tp" for p in preds)
     fp = sum(p["status"] == "fp" for p in preds)
     errs = np.concatenate([g["errors"] for g in counted if g["matched"]] or [np.zeros(0)])
+    rel = np.concatenate(
+        [g["errors"] / g["side"] for g in counted if g["matched"]] or [np.zeros(0)]
+    )
     n_corners = 4 * len(counted)
 
     def r(x: float) -> float | None:
@@ -109,10 +114,12 @@ def summarize(gts: list[dict], preds: list[dict], min_gate_px: float) -> dict:
         "gates": len(counted),
         "precision": r(tp / (tp + fp)) if tp + fp else None,
         "recall": r(sum(g["matched"] for g in counted) / len(counted)) if counted else None,
+        "false_positives": fp,
         "corner_error_px": {
             "mean": r(errs.mean()) if len(errs) else None,
             "median": r(np.median(errs)) if len(errs) else None,
         },
+        "corner_error_side": {"median": r(np.median(rel)) if len(rel) else None},
         "pck": {
             "2px": r((errs <= 2.0).sum() / n_corners) if n_corners else None,
             "5px": r((errs <= 5.0).sum() / n_corners) if n_corners else None,

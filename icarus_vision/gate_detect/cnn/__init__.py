@@ -34,7 +34,7 @@ from icarus_vision.gate_detect.cnn.checkpoint import (
     load_zoom,
 )
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig, decode, in_frame
-from icarus_vision.gate_detect.cnn.model import CornerNet, network_input, to_float
+from icarus_vision.gate_detect.cnn.model import CornerNet, letterbox_size, network_input, to_float
 from icarus_vision.gate_detect.cnn.refine import (
     RefineNet,
     keep_square,
@@ -341,14 +341,18 @@ class CnnDetector(Detector):
 
     def _corner_maps(self, images: list[np.ndarray]):
         """Per image (validated): (image, the corner network's maps, their scale to the image's
-        pixels (x, y)), the network run once on all of them."""
+        pixels (x, y)), the network run once on all of them. A frame of another aspect ratio
+        than the network's input is letterboxed (:func:`network_input`), not stretched."""
         images = [validate_image(im) for im in images]
         if not images:
             return []
         x = to_float(np.stack([network_input(im, self.input_size) for im in images]))
         out = run_network(self.model, x, dtype=torch.bfloat16 if self.bf16 else torch.float32)
-        return [(im, o, (im.shape[1] / o.shape[-1], im.shape[0] / o.shape[-2]))
-                for im, o in zip(images, out, strict=True)]  # fmt: skip
+        maps = []
+        for im, o in zip(images, out, strict=True):
+            w, h = letterbox_size(im.shape[1::-1], self.input_size)  # padded at right / bottom
+            maps.append((im, o, (w / o.shape[-1], h / o.shape[-2])))
+        return maps
 
     def _candidates(self, image: np.ndarray, out: np.ndarray, scale: tuple[float, float]):
         """Every candidate of one frame read by the refiner and the zoom stage: (refiner

@@ -20,7 +20,7 @@ from icarus_vision.dataset.layout import SPLITS
 from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.gate_detect.base import FLIP_ORDER
 from icarus_vision.gate_detect.cnn.augment import make_augment
-from icarus_vision.gate_detect.cnn.model import network_input
+from icarus_vision.gate_detect.cnn.model import letterbox_size, network_input
 
 
 @dataclass(frozen=True)
@@ -121,6 +121,74 @@ def load_split(
     size = (int(infos[0]["width"]), int(infos[0]["height"]))
     return Split(files, _read_images(files, input_size), [by_image[im["id"]] for im in infos],
                  infos, size)  # fmt: skip
+
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
+"""Image files a folder of images without gates may hold (case-insensitive)."""
+
+
+def load_eval_set(data_dir: str | Path, split: str = "test", limit: int | None = None) -> Split:
+    """The labelled images ``eval-detector`` scores, from any of three kinds of folder:
+
+    - a gen-dataset output folder (``annotations/<split>.json``): its ``split``, as
+      :func:`load_split`;
+    - a COCO-keypoints folder (``import-gates`` output, or any other): one ``.json`` file in the
+      folder (or in its ``annotations/``), images in ``images/`` (or beside the file); keypoints
+      TL, TR, BR, BL of category ``gate`` (an annotation of another category is ignored). No
+      manifest, camera, distance or pose is needed; corners with visibility 0 are unknown;
+    - a folder of images and nothing else: images without gates (every detection is a false
+      positive).
+
+    Images are not read (``images`` is None); every file is checked to exist.
+
+    Raises:
+        FileNotFoundError / ValueError: as :func:`load_split`, naming the file.
+    """
+    root = Path(data_dir)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: dataset folder not found")
+    if (root / "annotations" / f"{split}.json").is_file():
+        return load_split(root, split, None, limit)
+    jsons = sorted(root.glob("*.json")) or sorted(root.glob("annotations/*.json"))
+    jsons = [j for j in jsons if j.name not in ("config.json", "manifest.json")]
+    if len(jsons) > 1:
+        raise ValueError(
+            f"{root}: {len(jsons)} JSON files ({', '.join(j.name for j in jsons[:3])}); a COCO "
+            "folder holds one annotation file"
+        )
+    images_dir = root / "images" if (root / "images").is_dir() else root
+    if not jsons:  # images without gates
+        files = sorted(p for p in images_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise FileNotFoundError(f"{root}: no annotation file and no images found")
+        files = files[:limit]
+        return Split(files, None, [[] for _ in files], [{"file_name": f.name} for f in files],
+                     (0, 0))  # fmt: skip
+    return _coco_folder(jsons[0], images_dir if jsons[0].parent == root else root / "images",
+                        limit)  # fmt: skip
+
+
+def _coco_folder(ann_path: Path, images_dir: Path, limit: int | None) -> Split:
+    try:
+        coco = json.loads(ann_path.read_text())
+        gate_ids = {c["id"] for c in coco.get("categories", []) if c.get("name") == "gate"}
+        gate_ids = gate_ids or {c["id"] for c in coco.get("categories", [])}
+        infos = sorted(coco["images"], key=lambda im: im["id"])[:limit]
+        by_image: dict[int, list[GateTruth]] = {im["id"]: [] for im in infos}
+        for a in coco["annotations"]:
+            if a["image_id"] not in by_image or a.get("category_id", 1) not in gate_ids:
+                continue
+            kp = np.asarray(a["keypoints"], float).reshape(4, 3)
+            corners = np.where(kp[:, 2:] > 0, kp[:, :2], np.nan)
+            by_image[a["image_id"]].append(GateTruth(corners, kp[:, 2].astype(int), np.nan, a))
+    except (ValueError, KeyError, TypeError, IndexError, AttributeError) as e:
+        raise ValueError(f"{ann_path}: not a valid COCO keypoint file ({e})") from None
+    if not infos:
+        raise ValueError(f"{ann_path}: holds no images")
+    files = [images_dir / im["file_name"] for im in infos]
+    _read_images(files, None)
+    size = (int(infos[0].get("width", 0)), int(infos[0].get("height", 0)))
+    return Split(files, None, [by_image[im["id"]] for im in infos], infos, size)
 
 
 def load_splits(
@@ -234,7 +302,8 @@ class GateDataset(Dataset):
     def __getitem__(self, i: int):
         img = self.split.images[i]
         h, w = img.shape[:2]
-        sx, sy = w / self.split.image_size[0], h / self.split.image_size[1]
+        pw, ph = letterbox_size(self.split.image_size, (w, h))  # frames are letterboxed
+        sx, sy = w / pw, h / ph
         gates = self.split.gates[i]
         # (G, 4, 2) continuous input coordinates (left image edge at 0), NaN where unknown.
         kps = np.array([(g.corners + 0.5) * (sx, sy) for g in gates]).reshape(-1, 4, 2)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import cv2
 import numpy as np
 import torch
 from torch import nn
@@ -75,13 +76,33 @@ class ModelConfig:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
+PAD_VALUE = 114
+"""Grey level of the padding that letterboxes a frame of another aspect ratio."""
+
+
+def letterbox_size(size: tuple[int, int], input_size: tuple[int, int]) -> tuple[int, int]:
+    """(W, H) of a ``size`` frame padded at the right or bottom to ``input_size``'s aspect ratio
+    (``size`` itself when it already has it)."""
+    (w, h), (iw, ih) = size, input_size
+    if w * ih >= h * iw:
+        return w, -(-w * ih // iw)
+    return -(-h * iw // ih), h
+
+
 def network_input(image: np.ndarray, input_size: tuple[int, int]) -> np.ndarray:
-    """(H, W, 3) frame as the corner network reads it: resized to ``input_size`` (W, H) with
-    ``INTER_AREA`` (by :func:`~icarus_vision.gate_detect.cnn.resize.area_resize`: the same
-    output, faster at 5:4), as it is if already that size (training, validation, tuning and
-    the detector all read frames through this)."""
+    """(H, W, 3) frame as the corner network reads it: letterboxed (padded with grey at the
+    right or bottom to the input's aspect ratio, :func:`letterbox_size`, never stretched), then
+    resized to ``input_size`` (W, H) with ``INTER_AREA`` (by
+    :func:`~icarus_vision.gate_detect.cnn.resize.area_resize`: the same output, faster at 5:4);
+    as it is if already that size (training, validation, tuning and the detector all read
+    frames through this). Pixel (u, v) of the frame is at (u, v) x input / letterboxed size."""
     if image.shape[1::-1] == tuple(input_size):
         return image
+    h, w = image.shape[:2]
+    pw, ph = letterbox_size((w, h), input_size)
+    if (pw, ph) != (w, h):
+        image = cv2.copyMakeBorder(image, 0, ph - h, 0, pw - w, cv2.BORDER_CONSTANT,
+                                   value=(PAD_VALUE,) * image.shape[2])  # fmt: skip
     return area_resize(image, input_size)
 
 
