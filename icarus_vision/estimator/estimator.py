@@ -238,7 +238,14 @@ class GateEstimator:
         r_wc, t_wc = self._r_wb @ self._r_body_cam, odom.pos
         size = self._size_guess()
         sols, reasons = solve_detections(
-            detections, self._k, self._image_size, r_wc, t_wc, self.config.measurement, size
+            detections,
+            self._k,
+            self._image_size,
+            r_wc,
+            t_wc,
+            self.config.measurement,
+            size,
+            self.camera.undistort if self.camera.distorted else None,
         )
         if detections:
             self.counts["detections"] += len(detections)

@@ -10,6 +10,7 @@ second is missing its slot repeats the first with an infinite cost, so that it i
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +73,7 @@ def solve_detections(
     t_world_cam: np.ndarray,
     cfg: MeasurementConfig,
     range_size: float,
+    undistort: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[FrameSolutions | None, list[str | None]]:
     """Check and solve every detection of a frame.
 
@@ -79,6 +81,8 @@ def solve_detections(
         k: (3, 3) camera intrinsics; image_size: width and height, pixels.
         r_world_cam: (3, 3), t_world_cam: (3,) camera pose from odometry (and the mount).
         range_size: gate size assumed for the range check, m.
+        undistort: for a camera with lens distortion, maps its (4, 2) pixels to pinhole pixels
+            of ``k`` (the corners are checked as detected, solved undistorted).
 
     Returns:
         the solutions of the usable detections (None when there are none), and for each detection
@@ -90,7 +94,10 @@ def solve_detections(
     for det in detections:
         reason = check_corners(det.corners, width, height, cfg)
         if reason is None:
-            sols, c = measure_candidates(det.corners, 1.0, k, r_world_cam, t_world_cam, cfg)
+            corners = det.corners if undistort is None else undistort(det.corners)
+            sols, c = [], None
+            if np.isfinite(corners).all():  # undistorted: NaN outside the lens' one-to-one range
+                sols, c = measure_candidates(corners, 1.0, k, r_world_cam, t_world_cam, cfg)
             if not sols:
                 reason = "pnp_failed"
             else:

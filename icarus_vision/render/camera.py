@@ -16,11 +16,13 @@ its labels cannot disagree.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from icarus_vision.render.distortion import check_distortion, distort_pixels, undistort_pixels
 from icarus_vision.sim.dynamics import quat_to_rot
 from icarus_vision.sim.quad import CameraParams
 
@@ -218,6 +220,11 @@ class Camera:
     """Near clipping distance, m."""
     far: float = 200.0
     """Far clipping distance, m."""
+    distortion: str = "none"
+    """Lens model: ``none``, ``radtan`` or ``fisheye`` (:mod:`.distortion`); K stays the pinhole
+    one, and every projection, render and label goes through the lens."""
+    dist_coeffs: tuple[float, ...] = ()
+    """The lens model's coefficients (OpenCV's order)."""
 
     def __post_init__(self) -> None:
         if self.width < 8 or self.height < 8:
@@ -226,12 +233,17 @@ class Camera:
             raise ValueError(f"hfov_deg must be in (0, 170), got {self.hfov_deg}")
         if not 0.0 < self.near < self.far:
             raise ValueError(f"need 0 < near < far, got near={self.near}, far={self.far}")
+        object.__setattr__(self, "dist_coeffs", tuple(float(c) for c in self.dist_coeffs))
+        problem = check_distortion(self.distortion, self.dist_coeffs)
+        if problem is not None:
+            raise ValueError(problem)
 
     @classmethod
     def from_params(cls, params: CameraParams, **overrides: float) -> Camera:
         """The camera of a quadrotor file (``QuadParams.camera``), with optional field overrides."""
         kw = dict(width=params.width, height=params.height, hfov_deg=params.hfov_deg)
         kw["uptilt_deg"] = params.uptilt_deg
+        kw["distortion"], kw["dist_coeffs"] = params.distortion, tuple(params.dist_coeffs)
         kw.update(overrides)
         return cls(**kw)
 
@@ -264,7 +276,7 @@ class Camera:
     def project(
         self, points_world: np.ndarray, pos: np.ndarray, quat: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Project world points seen from one body pose.
+        """Project world points seen from one body pose (through the lens).
 
         Args:
             points_world: (..., 3) world points.
@@ -273,7 +285,66 @@ class Camera:
         Returns:
             pixels: (..., 2) (u, v), NaN behind the camera; depth: (...,) z in the optical frame.
         """
-        return project_points(self.K, self.to_camera(points_world, pos, quat))
+        px, z = project_points(self.K, self.to_camera(points_world, pos, quat))
+        return self.distort(px), z
+
+    @property
+    def distorted(self) -> bool:
+        """Whether the lens moves pixels (a ``distortion`` other than ``none``)."""
+        return self.distortion != "none"
+
+    def distort(self, pixels: np.ndarray) -> np.ndarray:
+        """(..., 2) pinhole pixels (of K) -> where this lens images them (a copy if none)."""
+        return distort_pixels(self.K, pixels, self.distortion, self.dist_coeffs)
+
+    def undistort(self, pixels: np.ndarray) -> np.ndarray:
+        """(..., 2) pixels of this camera's images -> pinhole pixels of K (what PnP takes)."""
+        return undistort_pixels(self.K, pixels, self.distortion, self.dist_coeffs)
+
+    def pinhole_cover(self, max_margin: float = 1.0) -> tuple[Camera, tuple[int, int]]:
+        """An undistorted camera whose image holds every ray this one sees, and its margin
+        (:func:`_pinhole_cover`, computed once per camera)."""
+        return _pinhole_cover(self, max_margin)
+
+    def _cover(self, max_margin: float) -> tuple[Camera, tuple[int, int]]:
+        """An undistorted camera whose image holds every ray this one sees, and its margin.
+
+        The same focal length and optical axis on a larger image: pixel (u, v) of K is pixel
+        (u + mx, v + my) of the cover. The margin is where the undistorted border of this image
+        falls, at most ``max_margin`` x the image size per side (rays beyond are not rendered).
+
+        Returns:
+            (the cover camera, (mx, my) pixels); (self, (0, 0)) without distortion.
+        """
+        if not self.distorted:
+            return self, (0, 0)
+        w, h = self.width, self.height
+        t = np.linspace(0.0, 1.0, 64)
+        border = np.concatenate([
+            np.stack([t * (w - 1), np.zeros_like(t)], 1), np.stack([t * (w - 1), np.full_like(t, h - 1)], 1),
+            np.stack([np.zeros_like(t), t * (h - 1)], 1), np.stack([np.full_like(t, w - 1), t * (h - 1)], 1),
+        ])  # fmt: skip
+        pin = self.undistort(border)
+        pin = pin[np.isfinite(pin).all(axis=1)]
+        over_x = max(0.0, -pin[:, 0].min(), pin[:, 0].max() - (w - 1)) if len(pin) else 0.0
+        over_y = max(0.0, -pin[:, 1].min(), pin[:, 1].max() - (h - 1)) if len(pin) else 0.0
+        f = self.K[0, 0]
+        widest = f * math.tan(math.radians(84.0)) - 0.5 * w  # keep the cover's FOV under 168°
+        mx = int(math.ceil(min(over_x, max_margin * w, widest))) + 2
+        my = int(math.ceil(min(over_y, max_margin * h, widest))) + 2
+        hfov = math.degrees(2.0 * math.atan(0.5 * (w + 2 * mx) / f))
+        cover = Camera(w + 2 * mx, h + 2 * my, hfov, self.uptilt_deg, self.roll_deg, self.near,
+                       self.far)  # fmt: skip
+        return cover, (mx, my)
+
+    def lens_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W) float32 maps for ``cv2.remap``: where each pixel of this camera's image lies in
+        the image of :meth:`pinhole_cover` (NaN-free: unreachable pixels map outside it)."""
+        cover, (mx, my) = self.pinhole_cover()
+        u, v = np.meshgrid(np.arange(self.width, dtype=float), np.arange(self.height, dtype=float))
+        pin = self.undistort(np.stack([u, v], axis=-1))
+        pin = np.where(np.isfinite(pin), pin, -1e4)
+        return (pin[..., 0] + mx).astype(np.float32), (pin[..., 1] + my).astype(np.float32)
 
     def in_image(self, pixels: np.ndarray) -> np.ndarray:
         """(..., 2) pixels -> (...,) bool, True inside the image area (NaN counts as outside)."""
@@ -303,3 +374,8 @@ class Camera:
     def depth_to_z(self, buffer: np.ndarray) -> np.ndarray:
         """Rendered depth buffer (H, W) in [0, 1] -> metric z along the optical axis (H, W)."""
         return depth_buffer_to_z(buffer, self.near, self.far)
+
+
+@functools.lru_cache(maxsize=64)
+def _pinhole_cover(camera: Camera, max_margin: float) -> tuple[Camera, tuple[int, int]]:
+    return camera._cover(max_margin)

@@ -156,7 +156,8 @@ def gate_labels(
     fws = np.array([frame_width or g.frame_width for g in gates])
     radii = math.sqrt(2.0) * (np.array([g.size for g in gates]) / 2.0 + fws) + fws
     centres = np.array([g.pos for g in gates], dtype=float)
-    in_view = spheres_in_view(camera, r_wc[None], t_wc[None], centres, radii)[0]
+    cover = camera.pinhole_cover()[0]  # the pinhole view of every ray the lens sees
+    in_view = spheres_in_view(cover, r_wc[None], t_wc[None], centres, radii)[0]
     for gid, gate in enumerate(gates):
         if not in_view[gid]:
             continue
@@ -172,6 +173,7 @@ def gate_labels(
             continue
         corners = g.corners()
         px, z = project_points(k, world_to_camera(corners, r_wc, t_wc))
+        px = camera.distort(px)
         in_front = z > camera.near
         px[~in_front] = np.nan
         bbox = _outer_bbox(camera, r_wc, t_wc, g, fw, seg == gate_bodies[gid])
@@ -183,6 +185,7 @@ def gate_labels(
         px_m = 1.5 * np.maximum(z, camera.near) / k[0, 0]
         off = np.minimum(0.5 * fw, px_m)[:, None] * outward - 0.5 * fw * g.normal
         probe_px, probe_z = project_points(k, world_to_camera(corners + off, r_wc, t_wc))
+        probe_px = camera.distort(probe_px)
         inside = camera.in_image(px) & in_front
         vis = corner_visibility(seg, depth, gate_bodies[gid], probe_px, probe_z, inside, fw + 0.02)
         labels.append(
@@ -212,8 +215,14 @@ def _outer_bbox(camera, r_wc, t_wc, gate: Gate, fw: float, mask: np.ndarray):
     the frame is behind the camera); None when nothing of the gate falls in the image."""
     h = gate.size / 2.0 + fw
     local = np.array([[x, y, z] for x in (-fw / 2, fw / 2) for y in (-h, h) for z in (-h, h)])
+    if camera.distorted:  # the lens bends the frame's edges: bound points along them too
+        t = np.linspace(0.0, 1.0, 17)[:, None, None]
+        pairs = [(i, j) for i in range(8) for j in range(i + 1, 8)
+                 if np.count_nonzero(local[i] != local[j]) == 1]  # fmt: skip
+        local = np.concatenate([local[i] + t[:, 0] * (local[j] - local[i]) for i, j in pairs])
     world = local @ _yaw_rot(gate.yaw).T + np.asarray(gate.pos)
     px, z = project_points(camera.K, world_to_camera(world, r_wc, t_wc))
+    px = camera.distort(px)
     if np.all(z > camera.near):
         x0, y0 = np.maximum(px.min(axis=0), -0.5)
         x1 = min(px[:, 0].max(), camera.width - 0.5)

@@ -88,6 +88,7 @@ class Scene:
         self._sky = self._sky_image()
         self._ground_tex = texture_image(self.style.ground)
         self._rays: dict[Camera, np.ndarray] = {}
+        self._lens_maps: dict[Camera, tuple] = {}  # cv2.remap maps of distorted cameras
 
     # -- building ---------------------------------------------------------------------------------
     def _load_egl(self) -> None:
@@ -212,6 +213,8 @@ class Scene:
         """
         cam = camera or self.camera
         light = lighting or Lighting()
+        if cam.distorted:  # the pinhole view of every ray the lens sees, then through the lens
+            return self._through_lens(cam, self.render(pos, quat, light, cam.pinhole_cover()[0]))
         w, h = cam.width, cam.height
         egl = self.renderer == "egl"
         with self._quiet():
@@ -251,6 +254,23 @@ class Scene:
             self._ground_tex, self.style.ground.tile_m, gain, sky, shadow, shadow_gain,
         )  # fmt: skip
         return Frame(rgb, seg, z)
+
+    def _through_lens(self, cam: Camera, pinhole: Frame) -> Frame:
+        """The frame ``cam`` takes, from the render of its pinhole cover: colours interpolated,
+        segmentation and depth from the nearest pinhole pixel."""
+        if cam not in self._lens_maps:
+            mx, my = cam.lens_maps()
+            near = (np.clip(np.rint(my), -1, pinhole.rgb.shape[0]).astype(np.intp),
+                    np.clip(np.rint(mx), -1, pinhole.rgb.shape[1]).astype(np.intp))  # fmt: skip
+            self._lens_maps[cam] = (mx, my, near)
+        mx, my, (rows, cols) = self._lens_maps[cam]
+        rgb = cv2.remap(pinhole.rgb, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        h, w = pinhole.seg.shape
+        outside = (rows < 0) | (rows >= h) | (cols < 0) | (cols >= w)
+        r, c = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
+        seg = np.where(outside, -1, pinhole.seg[r, c]).astype(np.int32)
+        depth = np.where(outside, np.float32(cam.far), pinhole.depth[r, c]).astype(np.float32)
+        return Frame(rgb, seg, depth)
 
     def _quiet(self) -> contextlib.AbstractContextManager:
         """Silences the EGL plugin's banners (TinyRenderer prints none)."""

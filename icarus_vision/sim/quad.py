@@ -30,6 +30,12 @@ class CameraParams:
     """Camera pitched up from the body x axis, degrees."""
     rate_hz: float = 30.0
     """Frame rate, Hz."""
+    distortion: str = "none"
+    """Lens model: ``none`` (pinhole), ``radtan`` (OpenCV's radial-tangential) or ``fisheye``
+    (OpenCV's fisheye); K stays the pinhole one of ``hfov_deg`` (render/distortion.py)."""
+    dist_coeffs: tuple[float, ...] = ()
+    """The model's coefficients: radtan ``[k1, k2, p1, p2]`` or ``[k1, k2, p1, p2, k3]``,
+    fisheye ``[k1, k2, k3, k4]``, none ``[]``."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +110,11 @@ def validate_quad(q: QuadParams, source: str = "<memory>") -> None:
         raise QuadError(f"{source}: camera.hfov_deg must be < 170, got {c.hfov_deg}")
     if not math.isfinite(c.uptilt_deg) or abs(c.uptilt_deg) > 90:
         raise QuadError(f"{source}: camera.uptilt_deg must be within ±90, got {c.uptilt_deg}")
+    from icarus_vision.render.distortion import check_distortion
+
+    problem = check_distortion(c.distortion, tuple(c.dist_coeffs))
+    if problem is not None:
+        raise QuadError(f"{source}: camera.{problem}")
 
 
 def quad_from_dict(data: dict, source: str = "<memory>") -> QuadParams:
@@ -144,6 +155,8 @@ def quad_to_toml(q: QuadParams) -> str:
         return repr(v)
 
     lines = [f"{k} = {fmt(v)}" for k, v in d.items()]
+    if cam["distortion"] == "none":  # a pinhole camera: written as before the lens existed
+        del cam["distortion"], cam["dist_coeffs"]
     lines += ["", "[camera]"] + [f"{k} = {fmt(v)}" for k, v in cam.items()]
     return "\n".join(lines) + "\n"
 
