@@ -19,7 +19,7 @@ import numpy as np
 
 from icarus_vision.dataset.layout import IMAGES, ShardSpec, image_file_name, shard_path
 from icarus_vision.fileio import atomic_write_bytes
-from icarus_vision.render.camera import Camera
+from icarus_vision.render.camera import PAD_VALUE, Camera
 from icarus_vision.render.labels import OUTSIDE, GateLabel, frame_labels
 from icarus_vision.render.poses import sample_poses, sample_track
 from icarus_vision.render.randomize import (
@@ -94,6 +94,7 @@ def iter_samples(
                 frame = scene.render(pos, quat, sample_lighting(recipe, rng))
                 labels = frame_labels(scene, frame, pos, quat, back_views=True)
                 rgb = apply_sensor_noise(frame.rgb, sample_sensor(recipe, rng), rng)
+                rgb = letterbox_into(rgb, (ds.width, ds.height))
                 yield Sample(
                     image_id=image_id,
                     rgb=rgb,
@@ -106,6 +107,18 @@ def iter_samples(
                     scene=f"{spec.name}/{k}",
                     gate_bodies=scene.gate_bodies,
                 )
+
+
+def letterbox_into(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A frame of a camera smaller than the dataset's (another aspect ratio) placed at the
+    top-left of a ``size`` (W, H) frame of the detector's padding grey, as the detector
+    letterboxes such a camera's frames (labels keep their pixels); other frames as they are."""
+    h, w = rgb.shape[:2]
+    if (w, h) == tuple(size):
+        return rgb
+    out = np.full((size[1], size[0], 3), PAD_VALUE, np.uint8)
+    out[:h, :w] = rgb
+    return out
 
 
 def _r(x, nd: int = 3):
@@ -149,11 +162,18 @@ def annotation_dict(label: GateLabel, image_id: int) -> dict:
 def image_dict(sample: Sample) -> dict:
     """COCO image entry, with the camera and the body pose that made it."""
     cam = sample.camera
+    lens = (
+        {"distortion": cam.distortion, "dist_coeffs": _r(cam.dist_coeffs, 6)}
+        if cam.distorted
+        else {}
+    )
+    if (cam.width, cam.height) != sample.rgb.shape[1::-1]:
+        lens["frame_px"] = [cam.width, cam.height]  # letterboxed: the camera's own frame
     return {
         "id": sample.image_id,
         "file_name": image_file_name(sample.image_id),
-        "width": cam.width,
-        "height": cam.height,
+        "width": int(sample.rgb.shape[1]),
+        "height": int(sample.rgb.shape[0]),
         "scene": sample.scene,
         "target_gate": None if sample.target < 0 else sample.target,
         "camera": {
@@ -161,6 +181,7 @@ def image_dict(sample: Sample) -> dict:
             "hfov_deg": _r(cam.hfov_deg, 4),
             "uptilt_deg": _r(cam.uptilt_deg, 4),
             "roll_deg": _r(cam.roll_deg, 4),
+            **lens,
         },
         "body_pos": _r(sample.pos, 4),
         "body_quat": _r(sample.quat, 6),

@@ -39,6 +39,20 @@ HARDWARE_OPENGL_SAMPLE_OFFSET = (0.0, 0.0)
 """The same for PyBullet's OpenGL renderer (the EGL plugin): it samples pixel centres (measured)."""
 
 
+PAD_VALUE = 114
+"""Grey level of the padding that letterboxes a frame of another aspect ratio (the detector's
+network input, and datasets of cameras of other aspects)."""
+
+
+def letterbox_size(size: tuple[int, int], input_size: tuple[int, int]) -> tuple[int, int]:
+    """(W, H) of a ``size`` frame padded at the right or bottom to ``input_size``'s aspect ratio
+    (``size`` itself when it already has it)."""
+    (w, h), (iw, ih) = size, input_size
+    if w * ih >= h * iw:
+        return w, -(-w * ih // iw)
+    return -(-h * iw // ih), h
+
+
 def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
     """Pinhole matrix K for square pixels and a centred principal point.
 

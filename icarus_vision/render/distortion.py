@@ -86,25 +86,28 @@ def undistort_pixels(
     """
     if model == "none":
         return np.asarray(px, float).copy()
-    target = _to_normalized(k, px)
-    p = target.copy()
-    h = 1e-6
-    ex, ey = np.array([h, 0.0]), np.array([0.0, h])
-    for _ in range(iterations):
-        f = distort_normalized(p, model, coeffs) - target
-        jx = distort_normalized(p + ex, model, coeffs) - distort_normalized(p - ex, model, coeffs)
-        jy = distort_normalized(p + ey, model, coeffs) - distort_normalized(p - ey, model, coeffs)
-        a, c = jx[..., 0] / (2 * h), jx[..., 1] / (2 * h)  # d(xd, yd)/dx
-        b, d = jy[..., 0] / (2 * h), jy[..., 1] / (2 * h)  # d(xd, yd)/dy
-        det = a * d - b * c
-        with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(all="ignore"):  # diverging pixels become NaN, silently
+        target = _to_normalized(k, px)
+        p = target.copy()
+        h = 1e-6
+        ex, ey = np.array([h, 0.0]), np.array([0.0, h])
+        for _ in range(iterations):
+            f = distort_normalized(p, model, coeffs) - target
+            jx = distort_normalized(p + ex, model, coeffs) - distort_normalized(
+                p - ex, model, coeffs
+            )
+            jy = distort_normalized(p + ey, model, coeffs) - distort_normalized(
+                p - ey, model, coeffs
+            )
+            a, c = jx[..., 0] / (2 * h), jx[..., 1] / (2 * h)  # d(xd, yd)/dx
+            b, d = jy[..., 0] / (2 * h), jy[..., 1] / (2 * h)  # d(xd, yd)/dy
+            det = a * d - b * c
             step = np.stack([(d * f[..., 0] - b * f[..., 1]) / det,
                              (a * f[..., 1] - c * f[..., 0]) / det], axis=-1)  # fmt: skip
-        p = p - step
-        if np.nanmax(np.abs(step), initial=0.0) < 1e-12:
-            break
-    residual = np.abs(distort_normalized(p, model, coeffs) - target).max(axis=-1)
-    with np.errstate(invalid="ignore"):
+            p = p - step
+            if np.nanmax(np.abs(step), initial=0.0) < 1e-12:
+                break
+        residual = np.abs(distort_normalized(p, model, coeffs) - target).max(axis=-1)
         p[~(residual < 1e-9)] = np.nan
     return _to_pixels(k, p)
 

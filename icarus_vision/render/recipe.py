@@ -1,7 +1,7 @@
 """Visual domain-randomisation recipe: frozen dataclasses of ranges, loaded from TOML.
 
 A recipe file (e.g. ``datasets/gates-v1.toml``) has one table per section dataclass: ``[gates]``,
-``[ground]``, ``[sky]``, ``[light]``, ``[distractors]``, ``[camera]``, ``[sensor]``, the geometry
+``[ground]``, ``[sky]``, ``[light]``, ``[distractors]``, ``[camera]``, ``[sensor]``, ``[hall]``, the geometry
 of the frames (``[tracks]``, ``[poses]``), the dataset layout (``[dataset]``), plus a top-level
 ``name``. Missing keys take the defaults; an unknown key or a bad value raises ValueError naming the
 key and the file. Ranges are ``[low, high]`` and are sampled uniformly.
@@ -18,6 +18,7 @@ from icarus_vision.render.recipe_sections import (
     DatasetSettings,
     DistractorRanges,
     GateRanges,
+    HallRanges,
     LightRanges,
     PoseRanges,
     Range,
@@ -33,6 +34,7 @@ __all__ = [
     "DatasetSettings",
     "DistractorRanges",
     "GateRanges",
+    "HallRanges",
     "LightRanges",
     "PoseRanges",
     "Range",

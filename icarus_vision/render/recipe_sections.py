@@ -53,6 +53,20 @@ class GateRanges(SurfaceRanges):
     """Texture tile size on the bars, m."""
     frame_width: Range = (0.06, 0.16)
     """Rendered bar width, m."""
+    depth: Range = (0.0, 0.0)
+    """Bar depth along the passage, m; 0: as deep as wide (a printed panel is a few cm deep)."""
+    trim_prob: float = 0.0
+    """Probability that a scene's gates have a trim lining the opening (an LED strip or padding,
+    its inner edge the opening's), of width ``trim_width`` and a colour of ``trim_palette``."""
+    trim_width: Range = (0.02, 0.08)
+    """Width of the trim, m."""
+    trim_led_prob: float = 0.6
+    """Probability that the trim is an LED strip: drawn at full brightness whatever the light,
+    with a glow around it."""
+    trim_palette: tuple[tuple[float, float, float], ...] = (
+        (1.0, 1.0, 1.0), (0.3, 1.0, 0.8), (0.2, 0.6, 1.0), (1.0, 0.2, 0.2), (0.3, 1.0, 0.3),
+    )  # fmt: skip
+    """Trim / LED colours, RGB in [0, 1] (jittered by ``palette_jitter``)."""
 
 
 @dataclass(frozen=True)
@@ -90,6 +104,11 @@ class DistractorRanges:
     """Typical extent, m."""
     height: Range = (0.0, 3.0)
     """Height of the object's centre above the ground, m (raised so it never sinks)."""
+    extra_prob: float = 0.0
+    """Probability that a distractor that is not gate-like is one of ``extra_shapes``."""
+    extra_shapes: tuple[str, ...] = ("person", "tree", "net", "banner")
+    """Shapes of the later recipes: ``person`` (a body and a head, 1.5-1.9 m), ``tree`` (a trunk
+    and a crown), ``net`` (a fence of thin bars in a grid), ``banner`` (a thin printed board)."""
 
 
 @dataclass(frozen=True)
@@ -102,6 +121,23 @@ class CameraJitter:
     """Camera uptilt, degrees."""
     roll_deg: Range = (-3.0, 3.0)
     """Mount roll about the optical axis, degrees."""
+    distortion_prob: float = 0.0
+    """Probability that a scene's camera has a lens (render/distortion.py): fisheye with
+    ``fisheye_prob``, else radial-tangential."""
+    fisheye_prob: float = 0.5
+    """Share of the lenses that are fisheye."""
+    radtan_k1: Range = (-0.35, 0.05)
+    """Radial-tangential k1 (negative: barrel, as wide-angle FPV lenses)."""
+    radtan_k2: Range = (0.0, 0.12)
+    """Radial-tangential k2 (p1, p2 are drawn within ±0.002)."""
+    fisheye_k1: Range = (-0.08, 0.08)
+    """Fisheye k1 (k2 within ±0.02, k3 = k4 = 0)."""
+    aspect_prob: float = 0.0
+    """Probability that a scene is seen by a camera of another aspect ratio (one of ``aspects``),
+    as large as fits in the dataset's frame, letterboxed into it with the detector's grey at the
+    right or bottom (what the detector reads from such a camera)."""
+    aspects: tuple[float, ...] = (1.0, 1.5, 1.778, 2.0)
+    """Width / height of those cameras (square FPV frames, 3:2 stills, 16:9, wide fisheye)."""
 
 
 @dataclass(frozen=True)
@@ -118,6 +154,48 @@ class SensorRanges:
     """Probability of a Gaussian blur."""
     blur_sigma_px: Range = (0.4, 1.2)
     """Blur standard deviation, pixels."""
+    exposure_ev: Range = (0.0, 0.0)
+    """Exposure change, stops (the image times 2^ev, clipped: under- and over-exposure)."""
+    color_cast: float = 0.0
+    """Each colour channel is scaled by 1 + U(-color_cast, color_cast)."""
+    vignette_prob: float = 0.0
+    """Probability of vignetting."""
+    vignette: Range = (0.2, 0.6)
+    """Brightness lost at the image corners (radial, quadratic)."""
+    motion_blur_prob: float = 0.0
+    """Probability of motion blur (a line kernel in a random direction)."""
+    motion_blur_px: Range = (3.0, 12.0)
+    """Length of the motion blur, pixels."""
+    defocus_prob: float = 0.0
+    """Probability of defocus (a disc kernel)."""
+    defocus_px: Range = (1.0, 3.0)
+    """Radius of the defocus disc, pixels."""
+    bloom_prob: float = 0.0
+    """Probability of bloom: the brightest parts of the image glow."""
+    bloom: Range = (0.3, 1.0)
+    """Strength of the bloom."""
+    jpeg_prob: float = 0.0
+    """Probability of JPEG compression."""
+    jpeg_quality: Range = (30.0, 95.0)
+    """JPEG quality."""
+
+
+@dataclass(frozen=True)
+class HallRanges:
+    """Indoor scenes: walls and a ceiling around the track, ceiling lights, trusses, banners."""
+
+    prob: float = 0.0
+    """Probability that a scene is indoors."""
+    height: Range = (5.0, 10.0)
+    """Ceiling height, m."""
+    margin: Range = (2.0, 10.0)
+    """Distance from the outermost gates to the walls, m."""
+    lights: tuple[int, int] = (4, 16)
+    """Ceiling light panels, inclusive range (drawn at full brightness, with a glow)."""
+    truss_prob: float = 0.5
+    """Probability of trusses: rows of bars under the ceiling."""
+    banners: tuple[int, int] = (0, 6)
+    """Printed banners on the walls, inclusive range."""
 
 
 @dataclass(frozen=True)
@@ -202,6 +280,8 @@ class Recipe:
     """Camera FOV, uptilt and roll jitter."""
     sensor: SensorRanges = field(default_factory=SensorRanges)
     """Sensor noise."""
+    hall: HallRanges = field(default_factory=HallRanges)
+    """Indoor scenes (none unless ``hall.prob`` > 0)."""
     tracks: TrackRanges = field(default_factory=TrackRanges)
     """Random track layouts."""
     poses: PoseRanges = field(default_factory=PoseRanges)
@@ -210,5 +290,27 @@ class Recipe:
     """Resolution, splits and sharding of a generated dataset."""
 
     def to_dict(self) -> dict:
-        """Plain nested dict (JSON-ready) of the resolved recipe."""
-        return asdict(self)
+        """Plain nested dict (JSON-ready) of the resolved recipe. A section's keys added with the
+        gates-v3 recipe are left out while all of them keep their defaults (which switch nothing
+        on), so an older recipe keeps the identity its datasets were written with."""
+        d = asdict(self)
+        for section, keys in LATER_KEYS.items():
+            default = asdict(type(getattr(self, section))())
+            if all(d[section][k] == default[k] for k in keys):
+                for k in keys:
+                    del d[section][k]
+        if d["hall"] == asdict(HallRanges()):
+            del d["hall"]
+        return d
+
+
+LATER_KEYS = {
+    "gates": ("depth", "trim_prob", "trim_width", "trim_led_prob", "trim_palette"),
+    "distractors": ("extra_prob", "extra_shapes"),
+    "camera": ("distortion_prob", "fisheye_prob", "radtan_k1", "radtan_k2", "fisheye_k1",
+               "aspect_prob", "aspects"),
+    "sensor": ("exposure_ev", "color_cast", "vignette_prob", "vignette", "motion_blur_prob",
+               "motion_blur_px", "defocus_prob", "defocus_px", "bloom_prob", "bloom", "jpeg_prob",
+               "jpeg_quality"),
+}  # fmt: skip
+"""Keys added with the gates-v3 recipe (real gates and places), by section."""

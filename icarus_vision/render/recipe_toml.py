@@ -15,13 +15,16 @@ from icarus_vision.fileio import read_toml
 from icarus_vision.render.recipe_sections import (
     CameraJitter,
     DatasetSettings,
+    DistractorRanges,
     GateRanges,
+    HallRanges,
     PoseRanges,
     Recipe,
+    SensorRanges,
     SurfaceRanges,
     TrackRanges,
 )
-from icarus_vision.render.textures import KINDS
+from icarus_vision.render.textures import ALL_KINDS
 from icarus_vision.validation import check_table
 
 
@@ -56,13 +59,17 @@ def _validate(obj, prefix: str, source: str) -> None:
             ):
                 raise _fail(source, key, f"must lie in [0, 1], got {list(v)}")
             if f.name in ("count", "tile", "size", "frame_width", "noise_std", "gamma", "gain",
-                          "hfov_deg", "blur_sigma_px", "ambient", "diffuse", "specular", "distance") \
+                          "hfov_deg", "blur_sigma_px", "ambient", "diffuse", "specular", "distance",
+                          "depth", "trim_width", "motion_blur_px", "defocus_px", "bloom",
+                          "vignette", "margin", "lights", "banners", "height") \
                     and v[0] < 0:  # fmt: skip
                 raise _fail(source, key, f"must be >= 0, got {list(v)}")
     if isinstance(obj, SurfaceRanges):
-        bad = [k for k in obj.kinds if k not in KINDS]
+        bad = [k for k in obj.kinds if k not in ALL_KINDS]
         if bad:
-            raise _fail(source, f"{prefix}kinds", f"unknown kind(s) {bad}; allowed: {list(KINDS)}")
+            raise _fail(
+                source, f"{prefix}kinds", f"unknown kind(s) {bad}; allowed: {list(ALL_KINDS)}"
+            )
         w = obj.kind_weights
         if len(w) != len(obj.kinds) or any(x < 0 for x in w) or sum(w) <= 0:
             raise _fail(
@@ -76,9 +83,39 @@ def _validate(obj, prefix: str, source: str) -> None:
                 )
         if obj.tile[0] <= 0 or obj.frame_width[0] <= 0:
             raise _fail(source, f"{prefix}tile/frame_width", "must be > 0")
+    _validate_later(obj, prefix, source)
     _validate_geometry(obj, prefix, source)
     if isinstance(obj, CameraJitter) and not (0 < obj.hfov_deg[0] and obj.hfov_deg[1] < 170):
         raise _fail(source, f"{prefix}hfov_deg", f"must lie in (0, 170), got {list(obj.hfov_deg)}")
+
+
+def _validate_later(obj, prefix: str, source: str) -> None:
+    """Checks of the keys added with the gates-v3 recipe."""
+    if isinstance(obj, GateRanges):
+        for c in obj.trim_palette:
+            if len(c) != 3 or not all(0.0 <= x <= 1.0 for x in c):
+                raise _fail(
+                    source, f"{prefix}trim_palette", f"RGB values must lie in [0, 1], got {list(c)}"
+                )
+        if obj.trim_prob > 0 and obj.trim_width[0] <= 0:
+            raise _fail(source, f"{prefix}trim_width", "must be > 0")
+    if isinstance(obj, DistractorRanges):
+        bad = [x for x in obj.extra_shapes if x not in ("person", "tree", "net", "banner")]
+        if bad or (obj.extra_prob > 0 and not obj.extra_shapes):
+            raise _fail(source, f"{prefix}extra_shapes",
+                        f"must be some of person, tree, net, banner, got {list(obj.extra_shapes)}")  # fmt: skip
+    if isinstance(obj, CameraJitter):
+        if not obj.aspects or any(not 0.2 <= a <= 5.0 for a in obj.aspects):
+            raise _fail(
+                source, f"{prefix}aspects", f"need ratios in [0.2, 5], got {list(obj.aspects)}"
+            )
+    if isinstance(obj, SensorRanges):
+        if not (1 <= obj.jpeg_quality[0] and obj.jpeg_quality[1] <= 100):
+            raise _fail(source, f"{prefix}jpeg_quality", "must lie in [1, 100]")
+        if obj.vignette[1] > 1.0 or obj.color_cast < 0:
+            raise _fail(source, f"{prefix}vignette/color_cast", "vignette <= 1, color_cast >= 0")
+    if isinstance(obj, HallRanges) and obj.height[0] <= 2.0:
+        raise _fail(source, f"{prefix}height", "the ceiling must be higher than 2 m")
 
 
 def _validate_geometry(obj, prefix: str, source: str) -> None:

@@ -28,7 +28,7 @@ from icarus_vision.render.camera import (
     Camera,
 )
 from icarus_vision.render.egl import load_egl_plugin, quiet_c_stdout, write_obj
-from icarus_vision.render.meshes import Mesh, box_corners, box_mesh, frame_mesh, gate_mesh
+from icarus_vision.render.meshes import Mesh, box_corners, box_mesh, frame_mesh
 from icarus_vision.render.shadows import cylinder_points, ground_shadow_mask, place, sphere_points
 from icarus_vision.render.style import DISTRACTOR_SHAPES, Distractor, Frame, Lighting, SceneStyle
 from icarus_vision.render.textures import Material, texture_image
@@ -76,12 +76,16 @@ class Scene:
         self._casters: list[np.ndarray] = []  # world points of each convex shadow-casting part
         self._caster_arrays: tuple[np.ndarray, np.ndarray] | None = None
         self.renderer = "tiny"
+        self._emissive: dict[int, tuple[float, float, float]] = {}  # body -> its colour, lit
+        self._alias: dict[int, int] = {}  # body -> the body it counts as (a trim: its gate)
         try:
             if egl:
                 self._load_egl()
             self.gates = track.physical_gates()
             self.gate_bodies = tuple(self._add_gate(i, g) for i, g in enumerate(self.gates))
             self.distractor_bodies = tuple(self._add_distractor(d) for d in distractors)
+            if self.style.hall is not None:
+                self._add_hall(self.style.hall)
         except BaseException:
             self.close()
             raise
@@ -122,8 +126,11 @@ class Scene:
         self._casters += list(place(parts, pos, yaw))
         self._caster_arrays = None
 
-    def _add_mesh(self, mesh: Mesh, material: Material, pos, yaw: float = 0.0) -> int:
-        """A static body of a mesh made of boxes (:func:`box_corners`), which cast shadows."""
+    def _add_mesh(
+        self, mesh: Mesh, material: Material, pos, yaw: float = 0.0, casts: bool = True
+    ) -> int:
+        """A static body of a mesh made of boxes (:func:`box_corners`), which cast shadows
+        unless ``casts`` is False (a hall's walls and ceiling)."""
         if self.renderer == "egl":  # the plugin crashes on in-memory meshes
             geometry = {"fileName": self._obj_file(mesh), "meshScale": [1.0, 1.0, 1.0]}
         else:
@@ -136,7 +143,8 @@ class Scene:
         vis = p.createVisualShape(
             p.GEOM_MESH, rgbaColor=material.rgba, physicsClientId=self.client, **geometry
         )
-        self._add_casters(box_corners(mesh), pos, yaw)
+        if casts:
+            self._add_casters(box_corners(mesh), pos, yaw)
         body = p.createMultiBody(
             baseMass=0.0,
             baseVisualShapeIndex=vis,
@@ -155,7 +163,17 @@ class Scene:
         mats = self.style.gate_materials
         mat = mats[i % len(mats)]
         fw = self.style.frame_width or gate.frame_width
-        return self._add_mesh(gate_mesh(gate.size, fw, mat.tile_m), mat, gate.pos, gate.yaw)
+        depth = self.style.frame_depth or fw
+        body = self._add_mesh(frame_mesh(gate.size, gate.size, fw, depth, mat.tile_m), mat,
+                              gate.pos, gate.yaw)  # fmt: skip
+        trim = self.style.trim
+        if trim is not None:  # lines the opening, a little proud of the bars on both faces
+            mesh = frame_mesh(gate.size, gate.size, min(trim.width, fw), depth + 0.02, 1.0)
+            lining = self._add_mesh(mesh, trim.material, gate.pos, gate.yaw, casts=False)
+            self._alias[lining] = body
+            if trim.led:
+                self._emissive[lining] = trim.material.color
+        return body
 
     def _add_distractor(self, d: Distractor) -> int:
         sx, sy, sz = d.size
@@ -166,6 +184,8 @@ class Scene:
         if d.shape == "box":
             mesh = box_mesh((0, 0, 0), (sx / 2, sy / 2, sz / 2), tile)
             return self._add_mesh(mesh, d.material, d.pos, math.radians(d.yaw_deg))
+        if d.shape in ("person", "tree", "net", "banner"):
+            return self._add_figure(d)
         if d.shape == "sphere":
             vis = p.createVisualShape(p.GEOM_SPHERE, radius=sx, physicsClientId=self.client)
             part = sphere_points(sx)
@@ -181,6 +201,111 @@ class Scene:
         )  # fmt: skip
         self._set_material(body, d.material)
         return body
+
+    def _add_figure(self, d: Distractor) -> int:
+        """A person, tree, net or banner (:class:`Distractor`); the first part's body id."""
+        sx, sy, sz = d.size
+        x, y, z = d.pos
+        yaw = math.radians(d.yaw_deg)
+        if d.shape == "banner":
+            return self._add_mesh(box_mesh((0, 0, 0), (sz / 2, sx / 2, sy / 2), d.material.tile_m),
+                                  d.material, d.pos, yaw)  # fmt: skip
+        if d.shape == "net":  # a fence of thin bars, sx wide, sy high, cells of sz
+            bar = 0.015
+            parts = [box_mesh((0, yy, 0), (bar, bar, sy / 2), 1.0, long_axis=2)
+                     for yy in np.arange(-sx / 2, sx / 2 + 1e-9, sz)]  # fmt: skip
+            parts += [box_mesh((0, 0, zz), (bar, sx / 2, bar), 1.0, long_axis=1)
+                      for zz in np.arange(-sy / 2, sy / 2 + 1e-9, sz)]  # fmt: skip
+            return self._add_mesh(Mesh.concat(parts), d.material, d.pos, yaw)
+        if d.shape == "person":  # a body, a head above it
+            body = self._add_distractor(
+                Distractor(
+                    "cylinder",
+                    (x, y, 0.44 * sz),
+                    (sx / 2, sx / 2, 0.88 * sz),
+                    d.yaw_deg,
+                    d.material,
+                )  # fmt: skip
+            )
+            head = 0.07 * sz
+            self._add_distractor(Distractor("sphere", (x, y, 0.88 * sz + head), (head, head, head),
+                                            d.yaw_deg, d.material2 or d.material))  # fmt: skip
+            return body
+        trunk = self._add_distractor(  # a tree: a trunk and a crown
+            Distractor(
+                "cylinder",
+                (x, y, 0.3 * sz),
+                (0.06 * sz, 0.06 * sz, 0.6 * sz),
+                d.yaw_deg,
+                d.material,
+            )  # fmt: skip
+        )
+        r = sx / 2
+        self._add_distractor(Distractor("sphere", (x, y, sz - r), (r, r, r), d.yaw_deg,
+                                        d.material2 or d.material))  # fmt: skip
+        return trunk
+
+    def _add_hall(self, hall) -> None:
+        """Walls, ceiling, ceiling lights, trusses and banners of an indoor hall (:class:`Hall`);
+        none of them casts a shadow (the light stands for the hall's many lamps)."""
+        (x0, y0), (x1, y1), h = hall.lo, hall.hi, hall.height
+        cx, cy, hx, hy, t = (x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) / 2, (y1 - y0) / 2, 0.1
+        tile = hall.walls.tile_m
+        for centre, half in (((cx, y0 - t, h / 2), (hx + 2 * t, t, h / 2)),
+                             ((cx, y1 + t, h / 2), (hx + 2 * t, t, h / 2)),
+                             ((x0 - t, cy, h / 2), (t, hy, h / 2)),
+                             ((x1 + t, cy, h / 2), (t, hy, h / 2))):  # fmt: skip
+            self._add_mesh(box_mesh((0, 0, 0), half, tile), hall.walls, centre, casts=False)
+        self._add_mesh(box_mesh((0, 0, 0), (hx + 2 * t, hy + 2 * t, t), hall.ceiling.tile_m),
+                       hall.ceiling, (cx, cy, h + t), casts=False)  # fmt: skip
+        lamp = Material("solid", (1.0, 0.98, 0.92))
+        for lx, ly, side in hall.lights:
+            body = self._add_mesh(box_mesh((0, 0, 0), (side / 2, side / 2, 0.03), 1.0), lamp,
+                                  (lx, ly, h - 0.05), casts=False)  # fmt: skip
+            self._emissive[body] = lamp.color
+        if hall.trusses:
+            grey = Material("solid", (0.55, 0.55, 0.58))
+            for ty in np.arange(y0 + 3.0, y1 - 1.0, 6.0):
+                for dz in (0.6, 1.4):
+                    self._add_mesh(box_mesh((0, 0, 0), (hx, 0.04, 0.04), 1.0, long_axis=0), grey,
+                                   (cx, float(ty), h - dz), casts=False)  # fmt: skip
+        for wall, along, z, w, bh, look in hall.banners:
+            if wall < 2:
+                pos = (
+                    x0 + along * (x1 - x0),
+                    (y0 if wall == 0 else y1) + (0.05 if wall == 0 else -0.05),
+                    z,
+                )
+                half = (w / 2, 0.02, bh / 2)
+            else:
+                pos = (
+                    (x0 if wall == 2 else x1) + (0.05 if wall == 2 else -0.05),
+                    y0 + along * (y1 - y0),
+                    z,
+                )
+                half = (0.02, w / 2, bh / 2)
+            self._add_mesh(box_mesh((0, 0, 0), half, look.tile_m), look, pos, casts=False)
+
+    def _lit(self, rgb: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Emissive bodies (LED trims, ceiling lights) at their colour with a glow; trims then
+        counted as their gates in ``seg``."""
+        if self._emissive:
+            ids = np.array(list(self._emissive), np.int64)
+            lut = np.zeros((int(ids.max()) + 3, 3), np.float32)  # seg starts at -2 (ground)
+            lut[ids + 2] = 255.0 * np.asarray(list(self._emissive.values()), np.float32)
+            light = lut[np.clip(seg, -2, ids.max()) + 2]
+            on = light.any(axis=2)
+            if on.any():
+                glow = cv2.GaussianBlur(light, (0, 0), 0.012 * max(rgb.shape[:2]))
+                out = rgb.astype(np.float32) + 1.5 * glow
+                out[on] = np.maximum(light[on], 0.85 * 255.0)
+                rgb = np.clip(out, 0, 255).astype(np.uint8)
+        if self._alias:
+            src = np.array(list(self._alias), np.int64)
+            lut = np.arange(-2, int(max(src.max(), seg.max())) + 1, dtype=np.int32)
+            lut[src + 2] = np.array(list(self._alias.values()), np.int32)
+            seg = lut[seg + 2]
+        return rgb, seg
 
     def _sky_image(self) -> np.ndarray:
         bg = self.style.background
@@ -253,6 +378,8 @@ class Scene:
             rgb, seg, z, cam, self._rays[cam], r_wc, t_wc,
             self._ground_tex, self.style.ground.tile_m, gain, sky, shadow, shadow_gain,
         )  # fmt: skip
+        if self._emissive or self._alias:
+            rgb, seg = self._lit(rgb, seg)
         return Frame(rgb, seg, z)
 
     def _through_lens(self, cam: Camera, pinhole: Frame) -> Frame:
@@ -264,7 +391,7 @@ class Scene:
                     np.clip(np.rint(mx), -1, pinhole.rgb.shape[1]).astype(np.intp))  # fmt: skip
             self._lens_maps[cam] = (mx, my, near)
         mx, my, (rows, cols) = self._lens_maps[cam]
-        rgb = cv2.remap(pinhole.rgb, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        rgb = cv2.remap(pinhole.rgb, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         h, w = pinhole.seg.shape
         outside = (rows < 0) | (rows >= h) | (cols < 0) | (cols >= w)
         r, c = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)

@@ -12,7 +12,8 @@ import numpy as np
 
 from icarus_vision.render.textures import Material
 
-DISTRACTOR_SHAPES = ("box", "cylinder", "sphere", "frame", "arch", "pole")
+DISTRACTOR_SHAPES = ("box", "cylinder", "sphere", "frame", "arch", "pole", "person", "tree", "net",
+                     "banner")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -40,22 +41,60 @@ class Distractor:
 
     shape: str
     """One of ``box``, ``cylinder``, ``sphere``, ``frame`` (closed non-square frame), ``arch``
-    (frame without its bottom bar) or ``pole``."""
+    (frame without its bottom bar), ``pole``, ``person``, ``tree``, ``net`` (a grid of thin bars)
+    or ``banner`` (a thin board)."""
     pos: tuple[float, float, float]
     """World position of the object's centre, m."""
     size: tuple[float, float, float]
     """Extents, m: box x, y, z; cylinder/pole (radius, radius, height); sphere (radius, -, -);
-    frame/arch (opening width, opening height, bar width)."""
+    frame/arch (opening width, opening height, bar width); person/tree (width, -, height);
+    net (width, height, mesh cell); banner (width, height, thickness)."""
     yaw_deg: float = 0.0
     """Heading about world z, degrees."""
     material: Material = field(default_factory=Material)
     """Surface look."""
+    material2: Material | None = None
+    """A second part's look: a person's head, a tree's crown."""
 
     def __post_init__(self) -> None:
         if self.shape not in DISTRACTOR_SHAPES:
             raise ValueError(
                 f"distractor shape must be one of {DISTRACTOR_SHAPES}, got {self.shape!r}"
             )
+
+
+@dataclass(frozen=True)
+class Trim:
+    """A lining of every gate's opening (an LED strip or padding); its inner edge is the opening."""
+
+    material: Material
+    """Its look (an LED's colour)."""
+    width: float
+    """Width, m."""
+    led: bool = False
+    """An LED strip: drawn at its colour's full brightness whatever the light, with a glow."""
+
+
+@dataclass(frozen=True)
+class Hall:
+    """An indoor hall around the track: four walls, a ceiling, lights, trusses, banners."""
+
+    lo: tuple[float, float]
+    """World x, y of the hall's corner with the smallest coordinates, m."""
+    hi: tuple[float, float]
+    """The opposite corner, m."""
+    height: float
+    """Ceiling height, m."""
+    walls: Material
+    """Look of the walls."""
+    ceiling: Material
+    """Look of the ceiling."""
+    lights: tuple[tuple[float, float, float], ...] = ()
+    """Ceiling light panels: (x, y, side) each, m (emissive, white)."""
+    trusses: bool = False
+    """Rows of bars under the ceiling."""
+    banners: tuple[tuple[int, float, float, float, float, Material], ...] = ()
+    """(wall 0-3, position along it 0-1, height m, width m, height m, look) each."""
 
 
 @dataclass(frozen=True)
@@ -74,6 +113,12 @@ class SceneStyle:
         default_factory=lambda: Material("solid", (0.62, 0.76, 0.92), (0.8, 0.85, 0.95), 40.0)
     )
     """Sky: painted, in image space, where no object or ground is seen (``tile_m`` in pixels)."""
+    frame_depth: float | None = None
+    """Rendered bar depth along the passage, m; None: as deep as wide."""
+    trim: Trim | None = None
+    """A lining of the gates' openings (an LED strip or padding), or none."""
+    hall: Hall | None = None
+    """An indoor hall around the track, or none (outdoors)."""
 
 
 @dataclass(frozen=True)

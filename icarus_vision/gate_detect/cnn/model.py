@@ -23,6 +23,7 @@ import torch
 from torch import nn
 
 from icarus_vision.gate_detect.cnn.resize import area_resize
+from icarus_vision.render.camera import PAD_VALUE, letterbox_size
 
 NUM_OUT = 15
 """Output channels: centre heatmap, 4 corner heatmaps, 2 offsets, 8 centre-to-corner vectors."""
@@ -74,19 +75,6 @@ class ModelConfig:
             raise ValueError(f"unknown model config keys {sorted(unknown)}")
         d = {"stem_width": 0, **d}  # files written before the stem existed had none
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
-
-
-PAD_VALUE = 114
-"""Grey level of the padding that letterboxes a frame of another aspect ratio."""
-
-
-def letterbox_size(size: tuple[int, int], input_size: tuple[int, int]) -> tuple[int, int]:
-    """(W, H) of a ``size`` frame padded at the right or bottom to ``input_size``'s aspect ratio
-    (``size`` itself when it already has it)."""
-    (w, h), (iw, ih) = size, input_size
-    if w * ih >= h * iw:
-        return w, -(-w * ih // iw)
-    return -(-h * iw // ih), h
 
 
 def network_input(image: np.ndarray, input_size: tuple[int, int]) -> np.ndarray:
