@@ -1,4 +1,5 @@
-"""`icarus-vision train-detector`: train the CNN gate-corner detector on a gen-dataset folder."""
+"""`icarus-vision train-detector`: train the CNN gate-corner detector on gen-dataset folders (and
+labelled real images), mixed by share."""
 
 from __future__ import annotations
 
@@ -14,7 +15,12 @@ from icarus_vision.cli import app, console, user_errors
 @app.command("train-detector")
 @user_errors
 def train_detector_cmd(
-    data: Path = typer.Option(..., help="gen-dataset output folder (train and val splits)."),
+    data: list[str] = typer.Option(
+        ...,
+        help="gen-dataset output folder (train and val splits), or a COCO-keypoints folder of "
+        "labelled real images (import-gates; training only); repeat to mix several, each as "
+        "DIR:SHARE for its share of the training draws (e.g. --data renders:7 --data real:1).",
+    ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, model.onnx, tb/."),
     epochs: int = typer.Option(12, min=1, help="Total epochs (a resumed run continues to this)."),
     seed: int = typer.Option(0, help="Random seed (weights, shuffling, augmentation)."),
@@ -71,7 +77,7 @@ def train_detector_cmd(
     if input_size is not None:
         model = replace(model, input_size=parse_size(input_size))
     result = train_detector(
-        data, out, epochs=epochs, seed=seed, resume=resume, model_config=model, init=init,
+        parse_data(data), out, epochs=epochs, seed=seed, resume=resume, model_config=model, init=init,
         config=TrainConfig(ignore_below_px=ignore_below_px, ema_decay=ema_decay, lr=lr),
         log=lambda s: console.print(s),
     )  # fmt: skip
@@ -86,6 +92,24 @@ def print_best(epoch: int, m: dict, out: Path, files: str) -> None:
         highlight=False,
     )
     console.print(f"checkpoints written to {escape(str(out))}/ ({files})")
+
+
+def parse_data(values: list[str]) -> list[tuple[Path, float]]:
+    """``--data DIR[:SHARE]`` (repeatable) -> (folder, share) pairs; a folder whose name ends in
+    ``:`` and a number is read as DIR:SHARE."""
+    out = []
+    for v in values:
+        head, sep, tail = v.rpartition(":")
+        try:
+            share = float(tail) if sep else 1.0
+        except ValueError:
+            head, share = v, 1.0
+        else:
+            head = head if sep else v
+        if not share > 0:
+            raise ValueError(f"--data {v}: the share after ':' must be a number > 0")
+        out.append((Path(head), share))
+    return out
 
 
 def parse_widths(text: str, n: int = 4) -> tuple[int, ...]:

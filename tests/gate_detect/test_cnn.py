@@ -501,3 +501,49 @@ def test_degenerate_network_outputs_decode_without_error():
     noise = torch.from_numpy(rng.normal(0.0, 3.0, (15, 60, 80)).astype(np.float32))
     gates = decode(noise, DecodeConfig(max_gates=20), (4.0, 4.0))
     assert len(gates) <= 20
+
+
+def test_training_mixes_renders_and_real_images_by_share(tiny_dataset, tmp_path):
+    """A gen-dataset and a COCO folder of another image size (real images, import-gates) in one
+    run: the COCO folder joins training only, each source gets its share of the draws, and the
+    run records its sources; a share that is not > 0 is refused on the command line."""
+    import cv2
+    from typer.testing import CliRunner
+
+    from icarus_vision.cli import app
+    from icarus_vision.gate_detect.cnn.data import load_splits
+    from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
+    from tests.gate_detect.conftest import QUAD, gate_image
+
+    real = tmp_path / "real"
+    (real / "images").mkdir(parents=True)
+    for n in range(3):
+        wide = np.concatenate([gate_image(), np.full((240, 120, 3), 110, np.uint8)], axis=1)
+        cv2.imwrite(str(real / "images" / f"r{n}.png"), wide)
+    (real / "labels.json").write_text(
+        json.dumps({f"r{n}.png": [QUAD.ravel().tolist()] for n in range(3)})
+    )
+    coco = tmp_path / "coco"
+    assert (
+        CliRunner()
+        .invoke(app, ["import-gates", str(real), "--format", "alphapilot", "--out", str(coco)])
+        .exit_code
+        == 0
+    )
+
+    train = load_splits([tiny_dataset, coco], "train", (80, 60), shares=[3.0, 1.0], same_size=False)
+    assert len(train.files) == 8 + 3 and train.size_of(8) == (440, 240)
+    np.testing.assert_allclose([train.weights[:8].sum(), train.weights[8:].sum()], [3.0, 1.0])
+    val = load_splits([tiny_dataset, coco], "val", (80, 60), same_size=False)
+    assert len(val.files) == 4  # the COCO folder has no val split
+
+    out = tmp_path / "run"
+    cfg = TrainConfig(batch_size=4, bf16=False, tune_decode=False)
+    r = train_detector([(tiny_dataset, 3.0), (coco, 1.0)], out, epochs=1, config=cfg,
+                       model_config=TINY_MODEL, progress=False)  # fmt: skip
+    stored = json.loads((out / "best" / "detector.json").read_text())["training"]["data"]
+    assert stored == [[str(tiny_dataset), 3.0], [str(coco), 1.0]] and r.epochs_done == 1
+    bad = CliRunner().invoke(
+        app, ["train-detector", "--data", f"{coco}:0", "--out", str(tmp_path / "o")]
+    )
+    assert bad.exit_code == 1 and "share" in bad.output

@@ -49,7 +49,9 @@ class Split:
         images: (N, h, w, 3) uint8 RGB at ``input_size`` (None when loaded without pixels).
         gates: per image, its labelled gates.
         image_info: per image, its COCO image entry (camera K, pose ...).
-        image_size: (W, H) of the camera frames, pixels.
+        image_size: (W, H) of the camera frames, pixels (of the first, where they differ).
+        weights: per image, how often training draws it relative to the others (None: all
+            alike); :func:`load_splits` gives each dataset its share.
     """
 
     files: list[Path]
@@ -57,6 +59,14 @@ class Split:
     gates: list[list[GateTruth]]
     image_info: list[dict]
     image_size: tuple[int, int]
+    weights: np.ndarray | None = None
+
+    def size_of(self, i: int) -> tuple[int, int]:
+        """(W, H) of image ``i`` (images of a COCO folder may differ in size)."""
+        info = self.image_info[i]
+        if "width" in info and "height" in info:
+            return int(info["width"]), int(info["height"])
+        return self.image_size
 
 
 def read_rgb(path: Path) -> np.ndarray:
@@ -197,18 +207,40 @@ def load_splits(
     input_size: tuple[int, int] | None = None,
     limit: int | None = None,
     disk: Path | None = None,
+    shares: list[float] | None = None,
+    same_size: bool = True,
 ) -> Split:
-    """:func:`load_split` of several datasets as one split (their cameras the same size). The
-    images are read straight into one array: joining loaded splits would hold them twice.
-    With ``disk`` (a ``.npy`` path), that array is a read-only file mapped from disk
-    (:func:`mapped_images`), for splits larger than memory.
+    """:func:`load_split` of several datasets as one split. The images are read straight into
+    one array: joining loaded splits would hold them twice. With ``disk`` (a ``.npy`` path),
+    that array is a read-only file mapped from disk (:func:`mapped_images`), for splits larger
+    than memory.
+
+    Args:
+        shares: each dataset's share of the training draws (``Split.weights``: a dataset of N
+            images with share w gives each image w / N); None: every image alike.
+        same_size: require one camera size (the later stages' patches assume it); the corner
+            network letterboxes frames of any size, so its training mixes them (False). A COCO
+            folder (real images from ``import-gates``) then joins the ``train`` split whole,
+            and no other split.
 
     Raises:
-        ValueError: datasets of different image sizes, or as :func:`load_split`.
+        ValueError: datasets of different image sizes where ``same_size``, or as
+            :func:`load_split`.
     """
-    parts = [load_split(d, split, None, limit) for d in data_dirs]
+    parts, used = [], []
+    for i, d in enumerate(data_dirs):
+        if not same_size and not (Path(d) / "annotations" / f"{split}.json").is_file():
+            if split != "train":
+                continue  # a COCO folder has no val split
+            part = load_eval_set(d, split, limit)
+        else:
+            part = load_split(d, split, None, limit)
+        parts.append(part)
+        used.append(i)
+    if not parts:
+        raise ValueError(f"none of {[str(d) for d in data_dirs]} has a {split} split")
     sizes = {s.image_size for s in parts}
-    if len(sizes) != 1:
+    if same_size and len(sizes) != 1:
         raise ValueError(f"datasets of different image sizes cannot be combined: {sorted(sizes)}")
     files = [f for s in parts for f in s.files]
     images = (
@@ -216,8 +248,17 @@ def load_splits(
         if disk is not None and input_size is not None
         else _read_images(files, input_size)
     )
+    weights = None
+    if shares is not None:
+        weights = np.concatenate(
+            [
+                np.full(len(s.files), shares[i] / len(s.files))
+                for i, s in zip(used, parts, strict=True)
+            ]
+        )
     return Split(files, images, [g for s in parts for g in s.gates],
-                 [i for s in parts for i in s.image_info], parts[0].image_size)  # fmt: skip
+                 [i for s in parts for i in s.image_info], parts[0].image_size,
+                 weights)  # fmt: skip
 
 
 def _read_images(files: list[Path], input_size: tuple[int, int] | None) -> np.ndarray | None:
@@ -287,7 +328,7 @@ class GateDataset(Dataset):
         from icarus_vision.gate_detect.cnn.targets import encode_targets
 
         self.split, self.grid, self.encode = split, grid, encode_targets
-        self.ignore_below = ignore_below_px * grid[0] / split.image_size[0]  # grid cells
+        self.ignore_below_px = ignore_below_px
         self.augment = make_augment(seed) if augment else None
         self.rng = np.random.default_rng(seed)
 
@@ -302,8 +343,9 @@ class GateDataset(Dataset):
     def __getitem__(self, i: int):
         img = self.split.images[i]
         h, w = img.shape[:2]
-        pw, ph = letterbox_size(self.split.image_size, (w, h))  # frames are letterboxed
+        pw, ph = letterbox_size(self.split.size_of(i), (w, h))  # frames are letterboxed
         sx, sy = w / pw, h / ph
+        ignore_below = self.ignore_below_px * self.grid[0] / pw  # grid cells
         gates = self.split.gates[i]
         # (G, 4, 2) continuous input coordinates (left image edge at 0), NaN where unknown.
         kps = np.array([(g.corners + 0.5) * (sx, sy) for g in gates]).reshape(-1, 4, 2)
@@ -322,7 +364,7 @@ class GateDataset(Dataset):
             vis = np.where(inside, vis, 0)
         gx, gy = self.grid[0] / w, self.grid[1] / h
         items = [(k * (gx, gy), v) for k, v in zip(kps, vis, strict=True)]
-        target, weight = self.encode(items, *self.grid, ignore_below=self.ignore_below)
+        target, weight = self.encode(items, *self.grid, ignore_below=ignore_below)
         x = np.ascontiguousarray(img.transpose(2, 0, 1), dtype=np.float32) / 255.0
         return x, target, weight
 

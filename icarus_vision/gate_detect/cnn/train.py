@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.data import DataLoader
+from torch.utils.data import DataLoader, WeightedRandomSampler
 
 from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.gate_detect.cnn.checkpoint import export_onnx, load_checkpoint, save_checkpoint
-from icarus_vision.gate_detect.cnn.data import GateDataset, load_split
+from icarus_vision.gate_detect.cnn.data import GateDataset, load_splits
 from icarus_vision.gate_detect.cnn.decode import DecodeConfig
 from icarus_vision.gate_detect.cnn.model import CornerNet, ModelConfig
 from icarus_vision.gate_detect.cnn.targets import detection_loss
@@ -84,7 +84,7 @@ class TrainResult:
 
 
 def train_detector(
-    data_dir: str | Path,
+    data_dir: str | Path | list,
     out_dir: str | Path,
     epochs: int = 30,
     seed: int = 0,
@@ -98,7 +98,11 @@ def train_detector(
     """Train (or resume training) the corner network.
 
     Args:
-        data_dir: gen-dataset output (its ``train`` and ``val`` splits are used).
+        data_dir: gen-dataset output (its ``train`` and ``val`` splits are used), or a list of
+            such folders and COCO-keypoints folders (real images, ``import-gates``: training
+            only), each a path or (path, share): each dataset's share of the training draws
+            (images drawn with replacement by share / its images; default: all images alike).
+            Validation reads the gen-dataset folders' ``val`` splits.
         out_dir: output folder (layout in the module docstring).
         epochs: total epochs (a resumed run continues up to this number).
         seed: seed of weights, shuffling and augmentation.
@@ -140,8 +144,12 @@ def train_detector(
         stored = meta.get("training", {}).get("config", {})
         known = {f.name for f in fields(TrainConfig)}
         cfg = replace(TrainConfig(**{k: v for k, v in stored.items() if k in known}), epochs=epochs)
-    train = load_split(data_dir, "train", mcfg.input_size, cfg.limit)
-    val = load_split(data_dir, "val", mcfg.input_size, cfg.limit)
+    sources = data_sources(data_dir)
+    dirs, shares = [d for d, _ in sources], [w for _, w in sources]
+    mixed = len(sources) > 1 or any(w != 1.0 for w in shares)
+    train = load_splits(dirs, "train", mcfg.input_size, cfg.limit, shares=shares if mixed else None,
+                        same_size=False)  # fmt: skip
+    val = load_splits(dirs, "val", mcfg.input_size, cfg.limit, same_size=False)
     grid = mcfg.grid
     decode_cfg = DecodeConfig()
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -156,11 +164,16 @@ def train_detector(
             ema.load_state_dict(st["ema"])
     gen = torch.Generator()
     ds = GateDataset(train, grid, augment=True, seed=cfg.seed, ignore_below_px=cfg.ignore_below_px)
-    loader = DataLoader(ds, cfg.batch_size, shuffle=True, generator=gen, drop_last=False)
+    if train.weights is None:
+        loader = DataLoader(ds, cfg.batch_size, shuffle=True, generator=gen, drop_last=False)
+    else:  # each dataset its share of the draws
+        sampler = WeightedRandomSampler(train.weights.tolist(), len(train.files), generator=gen)
+        loader = DataLoader(ds, cfg.batch_size, sampler=sampler, drop_last=False)
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(str(out / "tb"))
-    info = {"data": str(data_dir), "config": asdict(cfg)}
+    info = {"data": str(dirs[0]) if not mixed else [[str(d), w] for d, w in sources],
+            "config": asdict(cfg)}  # fmt: skip
     if init is not None:
         info["init"] = str(init)
 
@@ -241,6 +254,27 @@ def train_detector(
             log(f"decoding thresholds tuned on val: {tuned}")
     export_onnx(best_model, out / "model.onnx")
     return TrainResult(out, len(history), best[1], best[2], history)
+
+
+def data_sources(data) -> list[tuple[Path, float]]:
+    """(folder, share) of each training source: a path, or a list of paths and (path, share).
+
+    Raises:
+        ValueError: a share that is not a number > 0.
+    """
+    items = (
+        data
+        if isinstance(data, list | tuple) and not isinstance(data[0], str | float | int)
+        else [data]
+    )
+    out = []
+    for item in items:
+        path, share = (item, 1.0) if isinstance(item, str | Path) else item
+        share = float(share)
+        if not share > 0 or not np.isfinite(share):
+            raise ValueError(f"{path}: a dataset's share must be a number > 0, got {share}")
+        out.append((Path(path), share))
+    return out
 
 
 def warmup_cosine(
