@@ -36,7 +36,15 @@ def race_cmd(
         "camera renders through PyBullet whichever flies).",
     ),
     randomize: bool = typer.Option(
-        False, "--randomize/--no-randomize", help="Randomise mass, wind and gates."
+        False,
+        "--randomize/--no-randomize",
+        help="Randomise mass, wind and gates, and how the world looks (from --recipe).",
+    ),
+    recipe: str = typer.Option(
+        "gates-v1",
+        help="With --randomize: the visual recipe the world's look is drawn from, once per race "
+        "(gates-v1: the shipped detector's training data; gates-v3: real gates and places, halls, "
+        "LEDs, sensor effects; or a recipe TOML path). The camera stays the --quad file's.",
     ),
     latency: int = typer.Option(1, min=0, help="Perception latency in camera frames."),
     video: Path = typer.Option(None, help="Video path (default: OUT/race.mp4)."),
@@ -61,7 +69,8 @@ def race_cmd(
     quad_params = load_quad(quad) if quad is not None else None
     want_video = not no_video
     result = run_race(track, quad=quad_params, laps=laps, seed=seed, detector=detector, policy=policy,
-                      backend=backend, randomize=randomize, latency_frames=latency, video=want_video)  # fmt: skip
+                      backend=backend, randomize=randomize, latency_frames=latency, video=want_video,
+                      recipe=recipe)  # fmt: skip
     out = out or Path("runs") / f"race-{datetime.now():%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
     r = result.report

@@ -23,6 +23,7 @@ from icarus_vision.estimator.odometry import SimulatedOdometry
 from icarus_vision.gate_detect.base import Detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.render.camera import Camera
+from icarus_vision.render.randomize import Visuals, apply_sensor_noise
 from icarus_vision.sim.dynamics import quat_to_rpy
 from icarus_vision.sim.track import Track
 
@@ -45,8 +46,9 @@ class Perception:
     """Camera, detector and estimator for one drone, with detection latency."""
 
     def __init__(self, detector: str | Detector, prior: Track, camera: Camera, scene, seed: int, latency_frames: int,
-                 config: EstimatorConfig | None = None) -> None:  # fmt: skip
-        self.camera, self.scene = camera, scene
+                 config: EstimatorConfig | None = None, look: Visuals | None = None) -> None:  # fmt: skip
+        self.camera, self.scene, self.look = camera, scene, look
+        self.noise_rng = np.random.default_rng([seed, 37])  # the sensor's pixel noise
         self.detector = make_detector(detector) if isinstance(detector, str) else detector
         self.estimator = GateEstimator(camera, config or EstimatorConfig(), prior)
         self.odometry = SimulatedOdometry(seed=seed + 1)
@@ -56,14 +58,18 @@ class Perception:
 
     def frame(self, od, pos, quat) -> tuple[np.ndarray, list]:
         """Render and detect at the current true pose; fuse what is due."""
-        frame = self.scene.render(pos, quat)
-        dets = self.detector.detect(frame.rgb)
+        if self.look is None:
+            rgb = self.scene.render(pos, quat).rgb
+        else:  # the race's drawn light and sensor
+            rgb = self.scene.render(pos, quat, self.look.lighting).rgb
+            rgb = apply_sensor_noise(rgb, self.look.sensor, self.noise_rng)
+        dets = self.detector.detect(rgb)
         self.pending.append((od, dets))
         if len(self.pending) > self.latency:
             od_then, dets_then = self.pending.popleft()
             self.estimator.update(od_then, dets_then)
         self.estimate = self.estimator.predict(od)
-        return frame.rgb, dets
+        return rgb, dets
 
     def step(self, od) -> None:
         self.estimate = self.estimator.predict(od)
@@ -80,7 +86,7 @@ def observation_from(od, rel_world: np.ndarray, extra: np.ndarray | None = None)
 
 def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Camera, scene, seed: int,
              prior: Track, latency_frames: int = 1, on_frame=None,
-             estimator: EstimatorConfig | None = None) -> LoopRecord:  # fmt: skip
+             estimator: EstimatorConfig | None = None, look: Visuals | None = None) -> LoopRecord:  # fmt: skip
     """Fly one episode of a single-drone env (already reset) with perception in the loop.
 
     Args:
@@ -93,13 +99,15 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
         detector: a detector spec (``cnn[:PATH]``, ``opencv``, ``oracle``) or a built Detector.
         on_frame: ``f(rgb, detections, estimate, state)`` called at each camera frame (video).
         estimator: estimator configuration (noise model of the detector, filter gates).
+        look: the drawn look of the world (``scene`` built with its style and distractors): its
+            light renders every frame and its sensor effects degrade it.
     """
     core = env.unwrapped.core
     oracle = isinstance(detector, str) and parse_spec(detector)[0] == "oracle"
     per = (
         None
         if oracle
-        else Perception(detector, prior, camera, scene, seed, latency_frames, estimator)
+        else Perception(detector, prior, camera, scene, seed, latency_frames, estimator, look)
     )
     frame_dt = 1.0 / camera_rate(env)
     next_frame = 0.0

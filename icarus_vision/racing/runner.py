@@ -21,6 +21,7 @@ from icarus_vision.racing.loop import fly_loop
 from icarus_vision.racing.report import validate_report
 from icarus_vision.racing.warmup import warm_up
 from icarus_vision.render.camera import Camera
+from icarus_vision.render.randomize import load_recipe, sample_visuals
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.quad import QuadParams
@@ -88,6 +89,7 @@ def run_race(
     randomize: bool = False,
     latency_frames: int = 1,
     video: bool = False,
+    recipe: str | None = "gates-v1",
 ) -> RaceResult:
     """Fly ``track`` once with camera, detector, estimator and pilot in the loop.
 
@@ -97,7 +99,12 @@ def run_race(
             generalist), a shipped name, a path to an exported policy, or ``scripted``.
         backend: physics backend (batched, pybullet, mujoco or a plug-in's name); the camera
             renders through PyBullet either way.
-        randomize: mass, thrust, wind and gate jitter from the training ranges.
+        randomize: mass, thrust, wind and gate jitter from the training ranges, and how the
+            world looks from ``recipe``.
+        recipe: with ``randomize``, the visual domain-randomisation recipe (a packaged name or
+            a path) the camera's world is drawn from, once per race from ``seed``: gate looks,
+            ground, sky or hall, distractors, light and sensor effects (the camera itself stays
+            the quadrotor file's: the estimator knows it). None: the default look.
         latency_frames: camera frames between an image and its detections reaching the estimator.
         video: keep composed video frames (FPV with detections beside a top view).
     """
@@ -123,9 +130,10 @@ def run_race(
         randomization=RandomizationConfig(enabled=randomize),
         observation=obs_mode,
     )
+    looks = load_recipe(recipe) if randomize and recipe is not None else None  # fail before flying
     env = make_env(backend, config=cfg)
     camera = Camera.from_params(quad.camera)
-    scene = None
+    scene = look = None
     frames: list = []
     wall0 = time.perf_counter()
     try:
@@ -135,7 +143,11 @@ def run_race(
         if needs_camera:
             from icarus_vision.render.scene import Scene
 
-            scene = Scene(flown, camera)
+            if looks is None:
+                scene = Scene(flown, camera)
+            else:  # the world's look, drawn once per race (a stream of its own)
+                look = sample_visuals(looks, np.random.default_rng([seed, 36]), flown, camera)
+                scene = Scene(flown, camera, look.style, look.distractors)
         if detector_obj is not None:
             warm_up(detector_obj, scene, flown)  # compile before the clock starts
         wall0 = time.perf_counter()
@@ -150,7 +162,7 @@ def run_race(
 
         rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector_obj or detector, camera=camera,
                        scene=scene, seed=seed, prior=base, latency_frames=latency_frames, on_frame=on_frame,
-                       estimator=config_for_detector(det_name))  # fmt: skip
+                       estimator=config_for_detector(det_name), look=look)  # fmt: skip
     finally:
         env.close()
         if scene is not None:

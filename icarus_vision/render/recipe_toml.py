@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import typing
 from dataclasses import fields, is_dataclass
+from pathlib import Path
 
 from icarus_vision.fileio import read_toml
 from icarus_vision.render.recipe_sections import (
@@ -154,7 +155,24 @@ def recipe_from_dict(data: dict, source: str = "<memory>") -> Recipe:
     return _build(Recipe, data, "", source)
 
 
+PACKAGED = Path(__file__).resolve().parent / "recipes"
+"""The recipes that ship with the package (``gates-v1``: the shipped detector's training data;
+``gates-v3``: real gates and places); ``datasets/*.toml`` in the repository point at them."""
+
+
+def packaged_recipes() -> list[str]:
+    """Names of the packaged recipes."""
+    return sorted(p.stem for p in PACKAGED.glob("*.toml"))
+
+
 def load_recipe(path: str | os.PathLike) -> Recipe:
-    """Load a recipe TOML file; ValueError names the file and the key on any problem."""
+    """Load a recipe TOML file, or a packaged recipe by name (``gates-v1``, ``gates-v3``);
+    ValueError names the file and the key on any problem."""
+    if not Path(path).exists() and (PACKAGED / f"{path}.toml").is_file():
+        path = PACKAGED / f"{path}.toml"
+    elif not Path(path).exists() and "/" not in str(path) and not str(path).endswith(".toml"):
+        raise FileNotFoundError(
+            f"{path}: no such recipe file or packaged recipe ({', '.join(packaged_recipes())})"
+        )
     data = read_toml(path, "recipe", ValueError)
     return recipe_from_dict(data, source=str(path))

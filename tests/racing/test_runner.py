@@ -60,6 +60,7 @@ def test_video_frames_are_written_and_decode(tmp_path):
             "missing_policy.safetensors: policy file not found",
         ),
         ({"latency_frames": -1}, "latency_frames"),
+        ({"randomize": True, "recipe": "gates-v9"}, "gates-v1, gates-v3"),
     ],
 )
 def test_bad_arguments(kwargs, match):
@@ -79,3 +80,22 @@ def test_race_with_the_shipped_cnn_and_policy_finishes():
     p = r["perception"]
     assert p["frames"] > 10 and p["detection_rate"] > 0  # a 0.8 s flight, mostly climbing
     assert p["rel_gate_error_m"]["median"] < 0.5
+
+
+def test_randomize_draws_the_worlds_look_from_the_recipe():
+    """With --randomize the camera sees a world drawn from the recipe, once per race: the same
+    seed, the same frames; another seed, another look; the shipped CNN flies a single gate in a
+    gates-v1 world, and a gates-v3 one (halls, LEDs, lenses off: the quad's camera) renders."""
+    kw = {"backend": "batched", "policy": "scripted", "video": True, "randomize": True}
+    a = run_race("single-gate", seed=1, **kw)
+    b = run_race("single-gate", seed=1, **kw)
+    c = run_race("single-gate", seed=2, **kw)
+    plain = run_race("single-gate", seed=1, **{**kw, "recipe": None})
+    fpv = (slice(None), slice(0, 320))  # the video's left half is the camera
+    np.testing.assert_array_equal(a.video[5][fpv], b.video[5][fpv])
+    assert np.abs(a.video[5][fpv].astype(int) - c.video[5][fpv]).mean() > 10
+    assert np.abs(a.video[5][fpv].astype(int) - plain.video[5][fpv]).mean() > 10
+    r = run_race("single-gate", seed=4, randomize=True).report
+    assert r["finished"] and r["perception"]["detection_rate"] > 0
+    r = run_race("single-gate", seed=4, randomize=True, recipe="gates-v3").report
+    assert r["perception"]["frames"] > 10
