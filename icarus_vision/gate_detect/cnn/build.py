@@ -1,0 +1,291 @@
+"""``build-detector``: a CNN detector from nothing, in one resumable command.
+
+A build file (TOML, e.g. ``configs/detector-build.toml``) lists the datasets to generate and the
+stages to train, each stage starting from the checkpoint the one before it wrote:
+
+.. code-block:: toml
+
+    name = "detector"
+    [[datasets]]                      # rendered first, in order (gen-dataset, resumable)
+    name = "corner"                   # OUT/datasets/corner
+    recipe = "gates-v3"               # a packaged recipe or a path
+    images = 20000
+    seed = 0
+    [corner]                          # train-detector; data names datasets, "name:share" mixes
+    data = ["corner"]
+    epochs = 40
+    init = "shipped"                  # optional: fine-tune the shipped network (corner, refiner)
+    train = { ignore_below_px = 12 }  # TrainConfig fields; model = {...}: ModelConfig fields
+    [refiner]                         # train-refiner on the corner network's candidates
+    data = ["refine"]; val = ["refine"]; epochs = 10
+    train = {...}; net = {...}        # RefineTrainConfig, RefineConfig fields
+    [zoom]                            # train-zoom; val: one dataset
+    [rescorer]                        # train-rescorer; splits = ["train"]
+    [quantize]                        # int8 copies: data, images, split
+    [evaluate]                        # eval-detector on data's test split: OUT/eval.json and
+                                      # OUT/detector/error_model.json
+
+Every stage is optional except ``corner``; the thresholds are tuned on val by the stages
+themselves. Output: ``OUT/datasets/``, one folder per stage, ``OUT/detector/`` (the finished
+checkpoint, int8 copies included) and ``OUT/build.json`` (each step's time; a finished step is not
+run again, an interrupted one resumes). ``--scale`` multiplies every dataset's images and every
+stage's epochs (at least 1 each): a quick run of the same recipe.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from icarus_vision.fileio import atomic_write_json, read_toml
+from icarus_vision.validation import check_table, require_list, require_table
+
+STAGES = ("corner", "refiner", "zoom", "rescorer", "quantize", "evaluate")
+"""The build's steps after the datasets, in order."""
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """One dataset a build renders."""
+
+    name: str
+    recipe: str
+    images: int
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    """One stage: its data (dataset names, ``name:share`` for the corner network), validation
+    data, epochs and the settings of its configuration dataclasses."""
+
+    data: tuple[str, ...] = ()
+    val: tuple[str, ...] = ()
+    epochs: int = 1
+    init: str = ""
+    images: int = 400
+    split: str = "val"
+    splits: tuple[str, ...] = ("train",)
+    train: dict = field(default_factory=dict)
+    model: dict = field(default_factory=dict)
+    net: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BuildSpec:
+    """A whole build file."""
+
+    name: str
+    datasets: tuple[DatasetSpec, ...]
+    stages: dict[str, StageSpec]
+    source: str = "<memory>"
+
+
+def load_build(path: str | Path) -> BuildSpec:
+    """Read and check a build file; ValueError names the file and the key."""
+    raw = dict(read_toml(path, "build", ValueError))
+    src = str(path)
+    name = raw.pop("name", Path(path).stem)
+    sets = []
+    for i, d in enumerate(require_list(raw.pop("datasets", []), f"{src}: datasets", ValueError)):
+        kw = check_table(DatasetSpec, d, f"{src}: datasets[{i}]", ValueError)
+        if "name" not in kw or "recipe" not in kw or "images" not in kw:
+            raise ValueError(f"{src}: datasets[{i}]: needs name, recipe and images")
+        if kw["images"] < 1:
+            raise ValueError(f"{src}: datasets[{i}].images: must be >= 1")
+        sets.append(DatasetSpec(**kw))
+    names = {d.name for d in sets}
+    if len(names) != len(sets):
+        raise ValueError(f"{src}: datasets: names must differ")
+    unknown = sorted(set(raw) - set(STAGES))
+    if unknown:
+        raise ValueError(f"{src}: unknown table(s) {unknown}; allowed: {list(STAGES)}")
+    if "corner" not in raw:
+        raise ValueError(f"{src}: a build needs a [corner] stage")
+    stages = {}
+    for stage in STAGES:
+        if stage not in raw:
+            continue
+        table = require_table(raw[stage], f"{src}: [{stage}]", ValueError)
+        spec = StageSpec(**check_table(StageSpec, table, f"{src}: [{stage}]", ValueError))
+        for key in ("data", "val"):
+            for ref in getattr(spec, key):
+                if ref.split(":")[0] not in names:
+                    raise ValueError(
+                        f"{src}: [{stage}].{key}: {ref!r} names no dataset of the build"
+                    )
+        if spec.epochs < 1:
+            raise ValueError(f"{src}: [{stage}].epochs: must be >= 1")
+        if stage != "corner" and not spec.data:
+            raise ValueError(f"{src}: [{stage}].data: needs at least one dataset")
+        stages[stage] = spec
+    for later, needs in (("zoom", "refiner"), ("rescorer", "zoom")):
+        if later in stages and needs not in stages:
+            raise ValueError(f"{src}: [{later}] needs a [{needs}] stage before it")
+    if not stages["corner"].data:
+        raise ValueError(f"{src}: [corner].data: needs at least one dataset")
+    return BuildSpec(str(name), tuple(sets), stages, src)
+
+
+def build_detector(
+    spec: BuildSpec,
+    out: str | Path,
+    scale: float = 1.0,
+    workers: int = 2,
+    seed: int = 0,
+    log: Callable[[str], None] = print,
+    progress: bool = True,
+) -> Path:
+    """Run (or resume) a build (module docstring); returns ``OUT/detector``."""
+    from icarus_vision.dataset import generate_dataset
+
+    if not scale > 0:
+        raise ValueError(f"scale must be > 0, got {scale}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    record_path = out / "build.json"
+    record = json.loads(record_path.read_text()) if record_path.is_file() else {}
+    ident = {"name": spec.name, "source": spec.source, "scale": scale, "seed": seed}
+    if record.get("build", ident) != ident:
+        raise ValueError(f"{out} holds another build ({record.get('build')}); choose another --out")
+    record["build"] = ident
+    steps = record.setdefault("steps", {})
+
+    def step(name: str, fn: Callable[[], None]) -> None:
+        if name in steps:
+            log(f"{name}: done before ({steps[name]['seconds']:.0f} s)")
+            return
+        log(f"{name}: running")
+        t0 = time.perf_counter()
+        fn()
+        steps[name] = {"seconds": round(time.perf_counter() - t0, 1)}
+        atomic_write_json(record_path, record)
+
+    data = {d.name: out / "datasets" / d.name for d in spec.datasets}
+    for d in spec.datasets:
+        n = max(1, math.ceil(d.images * scale))
+        step(f"dataset {d.name}", lambda d=d, n=n: generate_dataset(
+            d.recipe, data[d.name], n, workers=workers, seed=d.seed))  # fmt: skip
+
+    def epochs(s: StageSpec) -> int:
+        return max(1, math.ceil(s.epochs * scale))
+
+    def resumes(folder: Path) -> bool:
+        return (folder / "last").is_dir()
+
+    st = spec.stages
+    current = out / "corner" / "best"
+    step("corner", lambda: _corner(st["corner"], data, out / "corner", epochs(st["corner"]), seed,
+                                   resumes(out / "corner"), log, progress))  # fmt: skip
+    if "refiner" in st:
+        s = st["refiner"]
+        step("refiner", lambda: _refiner(s, data, current, out / "refiner", epochs(s), seed,
+                                         resumes(out / "refiner"), log, progress))  # fmt: skip
+        current = out / "refiner" / "best"
+    if "zoom" in st:
+        s = st["zoom"]
+        step("zoom", lambda: _zoom(s, data, current, out / "zoom", epochs(s), seed,
+                                   resumes(out / "zoom"), log, progress))  # fmt: skip
+        current = out / "zoom" / "best"
+    if "rescorer" in st:
+        s = st["rescorer"]
+        step("rescorer", lambda: _rescorer(s, data, current, out / "rescorer", epochs(s), seed,
+                                           log, progress))  # fmt: skip
+        current = out / "rescorer"
+    final = out / "detector"
+
+    def finish() -> None:
+        shutil.rmtree(final, ignore_errors=True)
+        shutil.copytree(current, final, ignore=shutil.ignore_patterns("*.npz", "parts", "*.pt"))
+
+    step("detector", finish)
+    if "quantize" in st:
+        from icarus_vision.gate_detect.cnn.quantize import quantize_detector
+
+        s = st["quantize"]
+        step("quantize", lambda: quantize_detector(final, [data[n] for n in s.data], final,
+                                                   s.images, s.split, seed))  # fmt: skip
+    if "evaluate" in st:
+        from icarus_vision.gate_detect.evaluate import eval_detector
+
+        s = st["evaluate"]
+        step("evaluate", lambda: eval_detector(data[s.data[0]], f"cnn:{final}", out / "eval.json",
+                                               final / "error_model.json", resamples=0))  # fmt: skip
+    record["detector"] = str(final)
+    atomic_write_json(record_path, record)
+    return final
+
+
+def _sources(refs, data: dict[str, Path]) -> list:
+    out = []
+    for ref in refs:
+        name, _, share = ref.partition(":")
+        out.append((data[name], float(share)) if share else data[name])
+    return out
+
+
+def _corner(s: StageSpec, data, out: Path, epochs: int, seed: int, resume: bool, log, progress):
+    from icarus_vision.gate_detect.cnn.model import ModelConfig
+    from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
+
+    cfg = TrainConfig(**check_table(TrainConfig, s.train, "[corner].train", ValueError))
+    model = ModelConfig(**check_table(ModelConfig, s.model, "[corner].model", ValueError))
+    train_detector(_sources(s.data, data), out, epochs=epochs, seed=seed, resume=resume,
+                   config=cfg, model_config=model, init=_init(s.init), log=log,
+                   progress=progress)  # fmt: skip
+
+
+def _refiner(s: StageSpec, data, detector: Path, out: Path, epochs: int, seed: int, resume: bool,
+             log, progress):  # fmt: skip
+    from icarus_vision.gate_detect.cnn.refine import RefineConfig
+    from icarus_vision.gate_detect.cnn.refine_train import RefineTrainConfig, train_refiner
+
+    cfg = RefineTrainConfig(
+        **check_table(RefineTrainConfig, s.train, "[refiner].train", ValueError)
+    )
+    net = RefineConfig(**check_table(RefineConfig, s.net, "[refiner].net", ValueError))
+    train_refiner(detector, _sources(s.data, data), out, epochs=epochs, seed=seed, resume=resume,
+                  config=cfg, refine_config=net, log=log, progress=progress,
+                  val_data=_sources(s.val, data) or None, init=_init(s.init))  # fmt: skip
+
+
+def _init(spec: str):
+    """A stage's ``init``: none (""), the shipped detector ("shipped") or a checkpoint path."""
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
+
+    return {"": None, "shipped": SHIPPED}.get(spec, spec or None)
+
+
+def _zoom(s: StageSpec, data, detector: Path, out: Path, epochs: int, seed: int, resume: bool,
+          log, progress):  # fmt: skip
+    from icarus_vision.gate_detect.cnn.zoom import ZoomConfig
+    from icarus_vision.gate_detect.cnn.zoom_train import ZoomTrainConfig, train_zoom
+
+    cfg = ZoomTrainConfig(**check_table(ZoomTrainConfig, s.train, "[zoom].train", ValueError))
+    net = ZoomConfig(**check_table(ZoomConfig, s.net, "[zoom].net", ValueError))
+    val = _sources(s.val, data)
+    train_zoom(detector, _sources(s.data, data), out, val[0] if val else None, epochs=epochs,
+               seed=seed, resume=resume, config=cfg, zoom_config=net, log=log,
+               progress=progress)  # fmt: skip
+
+
+def _rescorer(s: StageSpec, data, detector: Path, out: Path, epochs: int, seed: int, log,
+              progress):  # fmt: skip
+    from icarus_vision.gate_detect.cnn.rescore import RescoreConfig
+    from icarus_vision.gate_detect.cnn.rescore_train import RescoreTrainConfig, train_rescorer
+
+    cfg = RescoreTrainConfig(
+        **check_table(RescoreTrainConfig, s.train, "[rescorer].train", ValueError)
+    )
+    cfg = replace(cfg, epochs=epochs, seed=seed)
+    net = RescoreConfig(**check_table(RescoreConfig, s.net, "[rescorer].net", ValueError))
+    train_rescorer(detector, _sources(s.data, data), out, list(s.splits), net, cfg,
+                   progress=progress, log=log)  # fmt: skip
+
+
+__all__ = ["BuildSpec", "build_detector", "load_build"]

@@ -1,0 +1,128 @@
+"""`build-detector`: a whole detector from a build file (tiny datasets and networks), resumed
+after an interruption without redoing finished steps; bad build files are one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from icarus_vision.cli import app
+from icarus_vision.gate_detect.registry import make_detector
+from tests.gate_detect.conftest import gate_image, write_recipe
+
+runner = CliRunner()
+
+BUILD = """
+name = "tiny"
+[[datasets]]
+name = "a"
+recipe = "{recipe}"
+images = 16
+seed = 1
+[[datasets]]
+name = "b"
+recipe = "{recipe}"
+images = 16
+seed = 2
+[corner]
+data = ["a:2", "b:1"]
+epochs = 1
+init = "shipped"
+train = {{ batch_size = 8, bf16 = false, lr = 1e-5, tune_decode = false }}
+model = {{ input_size = [256, 192] }}
+[refiner]
+data = ["b"]
+val = ["a"]
+epochs = 1
+init = "shipped"
+train = {{ batch_size = 16, lr = 1e-6, tune = false }}
+[zoom]
+data = ["a"]
+val = ["b"]
+epochs = 1
+net = {{ patch = 16, widths = [4, 4, 8, 8], hidden = 8, min_side_px = 4.0 }}
+[rescorer]
+data = ["a"]
+epochs = 2
+[quantize]
+data = ["b"]
+images = 4
+[evaluate]
+data = ["b"]
+"""
+
+
+def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkeypatch):
+    recipe = write_recipe(tmp_path / "tiny.toml")  # 320x240 frames: the shipped networks' size
+    recipe.write_text(
+        recipe.read_text().replace("width = 160\nheight = 120", "width = 320\nheight = 240")
+    )
+    config = tmp_path / "build.toml"
+    config.write_text(BUILD.format(recipe=recipe))
+    out = tmp_path / "build"
+    import icarus_vision.gate_detect.cnn.build as build
+
+    real = build._zoom
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(build, "_zoom", interrupted)
+    r = runner.invoke(
+        app, ["build-detector", "--config", str(config), "--out", str(out), "--workers", "1"]
+    )
+    assert r.exit_code != 0
+    done = json.loads((out / "build.json").read_text())["steps"]
+    assert set(done) == {"dataset a", "dataset b", "corner", "refiner"}
+    corner_weights = (out / "corner" / "best" / "model.safetensors").read_bytes()
+
+    monkeypatch.setattr(build, "_zoom", real)
+    r = runner.invoke(
+        app, ["build-detector", "--config", str(config), "--out", str(out), "--workers", "1"]
+    )
+    assert r.exit_code == 0, r.output
+    assert "corner: done before" in r.output and "refiner: done before" in r.output
+    assert (out / "corner" / "best" / "model.safetensors").read_bytes() == corner_weights
+    steps = json.loads((out / "build.json").read_text())["steps"]
+    assert list(steps)[-5:] == ["zoom", "rescorer", "detector", "quantize", "evaluate"]
+    meta = json.loads((out / "detector" / "detector.json").read_text())
+    assert {"refine", "zoom", "rescore", "int8"} <= set(meta)
+    assert json.loads((out / "eval.json").read_text())["images"] == 4  # b's test split
+    assert (out / "detector" / "error_model.json").is_file()
+    det = make_detector(f"cnn:{out / 'detector'}")
+    assert isinstance(det.detect(gate_image()), list)
+
+
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ("[corner]\ndata = ['x']\n", "names no dataset"),
+        (
+            "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[refiner]\ndata = ['a']\n",
+            "[corner]",
+        ),
+        (
+            "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\n[zoom]\ndata = ['a']\n",
+            "needs a [refiner]",
+        ),
+        (
+            "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\nepoch = 3\n",
+            "epoch",
+        ),
+        (
+            "[[datasets]]\nname = 'a'\nimages = 4\n[corner]\ndata = ['a']\n",
+            "needs name, recipe and images",
+        ),
+        ("[colour]\n", "unknown table"),
+    ],
+)
+def test_bad_build_files_are_one_line_errors(tmp_path, text, needle):
+    config = tmp_path / "b.toml"
+    config.write_text(text)
+    r = runner.invoke(
+        app, ["build-detector", "--config", str(config), "--out", str(tmp_path / "o")]
+    )
+    lines = [s for s in r.output.strip().splitlines() if s.strip()]
+    assert r.exit_code == 1 and len(lines) == 1 and needle in lines[0], r.output
