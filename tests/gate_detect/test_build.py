@@ -126,3 +126,43 @@ def test_bad_build_files_are_one_line_errors(tmp_path, text, needle):
     )
     lines = [s for s in r.output.strip().splitlines() if s.strip()]
     assert r.exit_code == 1 and len(lines) == 1 and needle in lines[0], r.output
+
+
+def test_a_build_fine_tunes_the_corner_network_and_keeps_the_shipped_later_stages(tmp_path):
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
+
+    recipe = write_recipe(tmp_path / "tiny.toml")
+    recipe.write_text(
+        recipe.read_text().replace("width = 160\nheight = 120", "width = 320\nheight = 240")
+    )
+    config = tmp_path / "build.toml"
+    config.write_text(f"""
+[[datasets]]
+name = "a"
+recipe = "{recipe}"
+images = 8
+[corner]
+data = ["a"]
+init = "shipped"
+train = {{ batch_size = 8, bf16 = false, lr = 1e-5, tune_decode = false }}
+[refiner]
+keep = "shipped"
+[zoom]
+keep = "shipped"
+[rescorer]
+keep = "shipped"
+""")
+    out = tmp_path / "build"
+    r = runner.invoke(
+        app, ["build-detector", "--config", str(config), "--out", str(out), "--workers", "1"]
+    )
+    assert r.exit_code == 0, r.output
+    meta = json.loads((out / "detector" / "detector.json").read_text())
+    shipped = json.loads((SHIPPED / "detector.json").read_text())
+    for key in ("refine", "zoom", "rescore", "decode"):
+        assert meta[key] == shipped[key]
+    assert meta["model"]["input_size"] == shipped["model"]["input_size"]
+    assert (out / "detector" / "model.safetensors").read_bytes() != (
+        SHIPPED / "model.safetensors"
+    ).read_bytes()
+    assert make_detector(f"cnn:{out / 'detector'}").detect(gate_image())

@@ -22,6 +22,8 @@ stages to train, each stage starting from the checkpoint the one before it wrote
     [zoom]                            # train-zoom; val: one dataset
     [rescorer]                        # train-rescorer; splits = ["train"]
     [quantize]                        # int8 copies: data, images, split
+    # keep = "shipped" (or a checkpoint) in [refiner], [zoom] and [rescorer]: those stages of that
+    # detector on the new corner network, untrained (its input size and candidate decoding)
     [evaluate]                        # eval-detector on data's test split: OUT/eval.json and
                                       # OUT/detector/error_model.json
 
@@ -68,6 +70,7 @@ class StageSpec:
     val: tuple[str, ...] = ()
     epochs: int = 1
     init: str = ""
+    keep: str = ""
     images: int = 400
     split: str = "val"
     splits: tuple[str, ...] = ("train",)
@@ -121,7 +124,9 @@ def load_build(path: str | Path) -> BuildSpec:
                     )
         if spec.epochs < 1:
             raise ValueError(f"{src}: [{stage}].epochs: must be >= 1")
-        if stage != "corner" and not spec.data:
+        if spec.keep and stage not in ("refiner", "zoom", "rescorer"):
+            raise ValueError(f"{src}: [{stage}].keep: only a refiner, zoom or rescorer is kept")
+        if stage != "corner" and not spec.data and not spec.keep:
             raise ValueError(f"{src}: [{stage}].data: needs at least one dataset")
         stages[stage] = spec
     for later, needs in (("zoom", "refiner"), ("rescorer", "zoom")):
@@ -182,6 +187,14 @@ def build_detector(
     current = out / "corner" / "best"
     step("corner", lambda: _corner(st["corner"], data, out / "corner", epochs(st["corner"]), seed,
                                    resumes(out / "corner"), log, progress))  # fmt: skip
+    kept = [k for k in ("refiner", "zoom", "rescorer") if k in st and st[k].keep]
+    if kept:  # the later stages of another detector on this corner network (no training)
+        sources = {st[k].keep for k in kept}
+        if len(sources) != 1 or kept != [k for k in ("refiner", "zoom", "rescorer") if k in st]:
+            raise ValueError(f"{spec.source}: keep: every later stage is kept, from one detector")
+        step("kept stages", lambda: graft(current, _init(sources.pop()), out / "kept", kept))
+        current = out / "kept"
+        st = {k: v for k, v in st.items() if k not in kept}
     if "refiner" in st:
         s = st["refiner"]
         step("refiner", lambda: _refiner(s, data, current, out / "refiner", epochs(s), seed,
@@ -219,6 +232,32 @@ def build_detector(
     record["detector"] = str(final)
     atomic_write_json(record_path, record)
     return final
+
+
+def graft(corner: Path, source: Path, out: Path, stages: list[str]) -> Path:
+    """``source``'s later ``stages`` (refiner, zoom, rescorer) on the corner network of the
+    checkpoint ``corner``, written to ``out``: the corner network reads frames at ``source``'s
+    input size with ``source``'s candidate decoding (what its refiner was tuned with)."""
+    from icarus_vision.gate_detect.cnn.checkpoint import (
+        load_checkpoint,
+        load_refiner,
+        load_rescorer,
+        load_zoom,
+        save_checkpoint,
+        save_rescorer,
+    )
+
+    model, _, meta = load_checkpoint(corner)
+    shipped, decode, smeta = load_checkpoint(source)
+    model.cfg = replace(model.cfg, input_size=shipped.cfg.input_size)
+    refiner = load_refiner(source, smeta) if "refiner" in stages else None
+    zoom = load_zoom(source, smeta) if "zoom" in stages else None
+    shutil.rmtree(out, ignore_errors=True)
+    save_checkpoint(out, model, decode, {**meta.get("training", {}), "later_stages": str(source)},
+                    refiner, smeta.get("refine_training"), zoom, smeta.get("zoom_training"))  # fmt: skip
+    if "rescorer" in stages:
+        save_rescorer(out, load_rescorer(source, smeta), smeta.get("rescore_training", {}))
+    return out
 
 
 def _sources(refs, data: dict[str, Path]) -> list:
