@@ -55,10 +55,14 @@ def _summary(reports: list[dict]) -> dict:
     }
 
 
+RECIPE = "gates-v1"
+"""The look ``race --randomize`` draws the world from (``--recipe``; none: the default look)."""
+
+
 def builtin(seeds: int, detector: str, policy: str = "default", backend: str = "pybullet") -> dict:
     out = {}
     for name in BUILTIN_TRACKS:
-        reports = [run_race(name, detector=detector, policy=policy, seed=s, randomize=True,
+        reports = [run_race(name, detector=detector, policy=policy, seed=s, randomize=True, recipe=RECIPE,
                             backend=backend).report
                    for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
         out[name] = _summary(reports)
@@ -71,7 +75,7 @@ def specialists(seeds: int) -> dict:
     out = {}
     for name in ("grand-prix", "split-s"):
         for det in ("oracle", "cnn"):
-            reports = [run_race(name, detector=det, policy="auto", seed=s, randomize=True).report
+            reports = [run_race(name, detector=det, policy="auto", seed=s, randomize=True, recipe=RECIPE).report
                        for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
             out[f"{name}/{det}"] = _summary(reports)
             print(name, det, out[f"{name}/{det}"], flush=True)
@@ -85,7 +89,14 @@ def vision(tracks: int, difficulty: float, policy: str = "default") -> dict:
         for i in range(tracks):
             track = race_track(10, 3000 + i, difficulty=difficulty)
             reports.append(
-                run_race(track, detector=det, policy=policy, seed=SEED0 + i, randomize=True).report
+                run_race(
+                    track,
+                    detector=det,
+                    policy=policy,
+                    seed=SEED0 + i,
+                    randomize=True,
+                    recipe=RECIPE,
+                ).report
             )
         out[det] = _summary(reports)
         print(det, out[det], flush=True)
@@ -103,8 +114,12 @@ def main() -> None:
     ap.add_argument("--policy", default="default",
                     help="builtin: default or auto; vision: default or an exported policy")  # fmt: skip
     ap.add_argument("--backend", default="pybullet", help="builtin: the physics backend")
+    ap.add_argument("--recipe", default=RECIPE,
+                    help="the look race --randomize draws (gates-v1, gates-v3, a path, or none)")  # fmt: skip
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
+    global RECIPE
+    RECIPE = None if args.recipe == "none" else args.recipe
     t0 = time.perf_counter()
     if args.what == "builtin":
         out = builtin(args.seeds, args.detector, args.policy, args.backend)
@@ -113,7 +128,7 @@ def main() -> None:
         out = specialists(args.seeds)
     else:
         out = vision(args.tracks, args.difficulty, args.policy)
-    out["wall_s"] = round(time.perf_counter() - t0, 1)
+    out["wall_s"], out["recipe"] = round(time.perf_counter() - t0, 1), RECIPE
     print(json.dumps(out, indent=1))
     if args.json:
         atomic_write_json(args.json, out)

@@ -190,8 +190,11 @@ def build_detector(
     kept = [k for k in ("refiner", "zoom", "rescorer") if k in st and st[k].keep]
     if kept:  # the later stages of another detector on this corner network (no training)
         sources = {st[k].keep for k in kept}
-        if len(sources) != 1 or kept != [k for k in ("refiner", "zoom", "rescorer") if k in st]:
-            raise ValueError(f"{spec.source}: keep: every later stage is kept, from one detector")
+        if len(sources) != 1 or kept != ["refiner", "zoom", "rescorer"][: len(kept)]:
+            raise ValueError(
+                f"{spec.source}: keep: the kept stages come first (refiner, then zoom, then "
+                "rescorer), from one detector"
+            )
         step("kept stages", lambda: graft(current, _init(sources.pop()), out / "kept", kept))
         current = out / "kept"
         st = {k: v for k, v in st.items() if k not in kept}
