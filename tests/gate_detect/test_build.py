@@ -116,6 +116,11 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
             "needs name, recipe and images",
         ),
         ("[colour]\n", "unknown table"),
+        (
+            "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\n"
+            "[refiner]\ndata = ['a']\n[zoom]\nkeep = 'shipped'\n",
+            "kept stages come first",
+        ),
     ],
 )
 def test_bad_build_files_are_one_line_errors(tmp_path, text, needle):

@@ -132,6 +132,15 @@ def load_build(path: str | Path) -> BuildSpec:
     for later, needs in (("zoom", "refiner"), ("rescorer", "zoom")):
         if later in stages and needs not in stages:
             raise ValueError(f"{src}: [{later}] needs a [{needs}] stage before it")
+    kept = [k for k in ("refiner", "zoom", "rescorer") if k in stages and stages[k].keep]
+    if kept and (
+        len({stages[k].keep for k in kept}) != 1
+        or kept != ["refiner", "zoom", "rescorer"][: len(kept)]
+    ):
+        raise ValueError(
+            f"{src}: keep: the kept stages come first (refiner, then zoom, then rescorer), "
+            "from one detector"
+        )
     if not stages["corner"].data:
         raise ValueError(f"{src}: [corner].data: needs at least one dataset")
     return BuildSpec(str(name), tuple(sets), stages, src)
@@ -189,13 +198,8 @@ def build_detector(
                                    resumes(out / "corner"), log, progress))  # fmt: skip
     kept = [k for k in ("refiner", "zoom", "rescorer") if k in st and st[k].keep]
     if kept:  # the later stages of another detector on this corner network (no training)
-        sources = {st[k].keep for k in kept}
-        if len(sources) != 1 or kept != ["refiner", "zoom", "rescorer"][: len(kept)]:
-            raise ValueError(
-                f"{spec.source}: keep: the kept stages come first (refiner, then zoom, then "
-                "rescorer), from one detector"
-            )
-        step("kept stages", lambda: graft(current, _init(sources.pop()), out / "kept", kept))
+        source = _init(st[kept[0]].keep)  # one detector for all (load_build checks)
+        step("kept stages", lambda: graft(current, source, out / "kept", kept))
         current = out / "kept"
         st = {k: v for k, v in st.items() if k not in kept}
     if "refiner" in st:
