@@ -105,6 +105,7 @@ def vision(tracks: int, difficulty: float, policy: str = "default") -> dict:
 
 
 def main() -> None:
+    global RECIPE
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("what", choices=["builtin", "specialists", "vision"])
     ap.add_argument("--seeds", type=int, default=20)
@@ -114,11 +115,10 @@ def main() -> None:
     ap.add_argument("--policy", default="default",
                     help="builtin: default or auto; vision: default or an exported policy")  # fmt: skip
     ap.add_argument("--backend", default="pybullet", help="builtin: the physics backend")
-    ap.add_argument("--recipe", default=RECIPE,
+    ap.add_argument("--recipe", default="gates-v1",
                     help="the look race --randomize draws (gates-v1, gates-v3, a path, or none)")  # fmt: skip
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
-    global RECIPE
     RECIPE = None if args.recipe == "none" else args.recipe
     t0 = time.perf_counter()
     if args.what == "builtin":
