@@ -89,6 +89,9 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
     assert list(steps)[-5:] == ["zoom", "rescorer", "detector", "quantize", "evaluate"]
     meta = json.loads((out / "detector" / "detector.json").read_text())
     assert {"refine", "zoom", "rescore", "int8"} <= set(meta)
+    config.write_text(config.read_text().replace("epochs = 2", "epochs = 3"))  # changed since
+    r = runner.invoke(app, ["build-detector", "--config", str(config), "--out", str(out)])
+    assert r.exit_code == 1 and "changed since" in r.output
     assert json.loads((out / "eval.json").read_text())["images"] == 4  # b's test split
     assert (out / "detector" / "error_model.json").is_file()
     det = make_detector(f"cnn:{out / 'detector'}")

@@ -36,12 +36,13 @@ stage's epochs (at least 1 each): a quick run of the same recipe.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from icarus_vision.fileio import atomic_write_json, read_toml
@@ -164,9 +165,15 @@ def build_detector(
     out.mkdir(parents=True, exist_ok=True)
     record_path = out / "build.json"
     record = json.loads(record_path.read_text()) if record_path.is_file() else {}
-    ident = {"name": spec.name, "source": spec.source, "scale": scale, "seed": seed}
+    settings = json.dumps([asdict(d) for d in spec.datasets] + [
+        {k: asdict(v)} for k, v in spec.stages.items()], sort_keys=True, default=str)  # fmt: skip
+    ident = {"name": spec.name, "source": spec.source, "scale": scale, "seed": seed,
+             "settings": hashlib.sha256(settings.encode()).hexdigest()[:16]}  # fmt: skip
     if record.get("build", ident) != ident:
-        raise ValueError(f"{out} holds another build ({record.get('build')}); choose another --out")
+        raise ValueError(
+            f"{out} holds another build, or this build file was changed since its steps ran "
+            f"({record.get('build')}); choose another --out"
+        )
     record["build"] = ident
     steps = record.setdefault("steps", {})
 
