@@ -220,8 +220,10 @@ def import_gates(
     files = _images(Path(images))
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ValueError(f"{out}: exists and is not an empty folder; choose another --out")
+    sizes: dict[str, tuple[int, int]] = {}
     if fmt == "yolo-pose":
-        labels = read_yolo_pose(labels_at, {n: _size(p) for n, p in files.items()})
+        sizes = {n: _size(p) for n, p in files.items()}
+        labels = read_yolo_pose(labels_at, sizes)
     else:
         labels = (read_alphapilot if fmt == "alphapilot" else read_corners_csv)(labels_at)
         missing = sorted(set(labels) - set(files))
@@ -237,7 +239,7 @@ def import_gates(
     (out / "images").mkdir(parents=True, exist_ok=True)
     for i, name in enumerate(names, 1):
         path = files[name]
-        w, h = _size(path)
+        w, h = sizes[name] if name in sizes else _size(path)
         coco_images.append({"id": i, "file_name": name, "width": w, "height": h})
         for gate in labels[name]:
             anns.append(_annotation(len(anns) + 1, i, gate))

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 from torch.utils.data import Dataset
 
+from icarus_vision.dataset.importers import IMAGE_SUFFIXES
 from icarus_vision.dataset.layout import SPLITS
 from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.gate_detect.base import FLIP_ORDER
@@ -131,10 +132,6 @@ def load_split(
     size = (int(infos[0]["width"]), int(infos[0]["height"]))
     return Split(files, _read_images(files, input_size), [by_image[im["id"]] for im in infos],
                  infos, size)  # fmt: skip
-
-
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
-"""Image files a folder of images without gates may hold (case-insensitive)."""
 
 
 def load_eval_set(data_dir: str | Path, split: str = "test", limit: int | None = None) -> Split:
