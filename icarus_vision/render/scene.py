@@ -93,6 +93,7 @@ class Scene:
         self._ground_tex = texture_image(self.style.ground)
         self._rays: dict[Camera, np.ndarray] = {}
         self._lens_maps: dict[Camera, tuple] = {}  # cv2.remap maps of distorted cameras
+        self._luts = self._lookup_tables()
 
     # -- building ---------------------------------------------------------------------------------
     def _load_egl(self) -> None:
@@ -286,25 +287,35 @@ class Scene:
                 half = (0.02, w / 2, bh / 2)
             self._add_mesh(box_mesh((0, 0, 0), half, look.tile_m), look, pos, casts=False)
 
+    def _lookup_tables(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """By segmentation id + 2 (ground is -2): each emissive body's lit colour (0 elsewhere),
+        and the id each body counts as (a trim: its gate); None where the scene has none. The
+        bodies are all built by now, so both are made once."""
+        n = p.getNumBodies(physicsClientId=self.client) + 2
+        light = alias = None
+        if self._emissive:
+            light = np.zeros((n, 3), np.float32)
+            ids = np.array(list(self._emissive), np.int64)
+            light[ids + 2] = 255.0 * np.asarray(list(self._emissive.values()), np.float32)
+        if self._alias:
+            alias = np.arange(-2, n - 2, dtype=np.int32)
+            alias[np.array(list(self._alias), np.int64) + 2] = list(self._alias.values())
+        return light, alias
+
     def _lit(self, rgb: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Emissive bodies (LED trims, ceiling lights) at their colour with a glow; trims then
         counted as their gates in ``seg``."""
-        if self._emissive:
-            ids = np.array(list(self._emissive), np.int64)
-            lut = np.zeros((int(ids.max()) + 3, 3), np.float32)  # seg starts at -2 (ground)
-            lut[ids + 2] = 255.0 * np.asarray(list(self._emissive.values()), np.float32)
-            light = lut[np.clip(seg, -2, ids.max()) + 2]
+        light_lut, alias_lut = self._luts
+        if light_lut is not None:
+            light = light_lut[seg + 2]
             on = light.any(axis=2)
             if on.any():
                 glow = cv2.GaussianBlur(light, (0, 0), 0.012 * max(rgb.shape[:2]))
                 out = rgb.astype(np.float32) + 1.5 * glow
                 out[on] = np.maximum(light[on], 0.85 * 255.0)
                 rgb = np.clip(out, 0, 255).astype(np.uint8)
-        if self._alias:
-            src = np.array(list(self._alias), np.int64)
-            lut = np.arange(-2, int(max(src.max(), seg.max())) + 1, dtype=np.int32)
-            lut[src + 2] = np.array(list(self._alias.values()), np.int32)
-            seg = lut[seg + 2]
+        if alias_lut is not None:
+            seg = alias_lut[seg + 2]
         return rgb, seg
 
     def _sky_image(self) -> np.ndarray:

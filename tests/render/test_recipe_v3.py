@@ -22,7 +22,7 @@ from icarus_vision.render.randomize import (
 )
 from icarus_vision.render.recipe_sections import LATER_KEYS
 from icarus_vision.render.scene import Scene
-from icarus_vision.render.style import SceneStyle, Trim
+from icarus_vision.render.style import Distractor, SceneStyle, Trim
 from icarus_vision.render.textures import Material, texture_image
 from icarus_vision.sim.random_track import random_track
 from icarus_vision.sim.track import Gate, Track
@@ -115,16 +115,21 @@ def test_an_led_trim_glows_and_counts_as_its_gate():
     dark = Material("solid", (0.1, 0.1, 0.1))
     led = Trim(Material("solid", (0.2, 1.0, 0.4)), 0.05, led=True)
     style = SceneStyle(gate_materials=(dark,), frame_width=0.3, frame_depth=0.04, trim=led)
-    with Scene(track, Camera(uptilt_deg=0.0), style) as scene:
+    grey = Material("solid", (0.4, 0.4, 0.4))
+    box = Distractor("box", (6.0, -1.5, 2.0), (0.5, 0.5, 0.5), 0.0, grey)  # built after the trim
+    with Scene(track, Camera(uptilt_deg=0.0), style, (box,)) as scene:
         frame = scene.render(EYE, LEVEL)
         (lab,) = frame_labels(scene, frame, EYE, LEVEL)
         body = scene.gate_bodies[0]
+        (box_body,) = scene.distractor_bodies
+    box_px = frame.rgb[frame.seg == box_body]
+    assert len(box_px) > 20 and box_px[:, 1].max() < 200  # not lit like the LED
     assert list(lab.visibility) == [VISIBLE] * 4
     u, v = np.round(lab.corners_px[0]).astype(int)
     near = frame.rgb[v - 3 : v, u - 3 : u].reshape(-1, 3)  # on the trim, just outside the corner
     assert (near[:, 1] > 200).any() and (frame.seg[v - 3 : v, u - 3 : u] == body).any()
     assert frame.rgb[frame.seg == body][:, 1].max() == 255  # lit whatever the light
-    assert set(np.unique(frame.seg)) <= {body, -1, -2}  # the trim's own body never shows
+    assert set(np.unique(frame.seg)) <= {body, box_body, -1, -2}  # the trim's body never shows
 
 
 def test_letterboxed_v3_frames_and_labels(tmp_path):
