@@ -121,6 +121,11 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
         ("[colour]\n", "unknown table"),
         (
             "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\n"
+            "[refiner]\ndata = ['a:2']\n",
+            "for [corner].data only",
+        ),
+        (
+            "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\n"
             "[refiner]\ndata = ['a']\n[zoom]\nkeep = 'shipped'\n",
             "kept stages come first",
         ),

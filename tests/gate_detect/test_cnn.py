@@ -512,7 +512,7 @@ def test_training_mixes_renders_and_real_images_by_share(tiny_dataset, tmp_path)
 
     from icarus_vision.cli import app
     from icarus_vision.gate_detect.cnn.data import load_splits
-    from icarus_vision.gate_detect.cnn.train import TrainConfig, train_detector
+    from icarus_vision.gate_detect.cnn.train import TrainConfig, data_sources, train_detector
     from tests.gate_detect.conftest import QUAD, gate_image
 
     real = tmp_path / "real"
@@ -541,6 +541,7 @@ def test_training_mixes_renders_and_real_images_by_share(tiny_dataset, tmp_path)
     cfg = TrainConfig(batch_size=4, bf16=False, tune_decode=False)
     r = train_detector([(tiny_dataset, 3.0), (coco, 1.0)], out, epochs=1, config=cfg,
                        model_config=TINY_MODEL, progress=False)  # fmt: skip
+    assert data_sources([str(tiny_dataset), (coco, 2)]) == [(tiny_dataset, 1.0), (coco, 2.0)]
     stored = json.loads((out / "best" / "detector.json").read_text())["training"]["data"]
     assert stored == [[str(tiny_dataset), 3.0], [str(coco), 1.0]] and r.epochs_done == 1
     bad = CliRunner().invoke(

@@ -119,6 +119,10 @@ def load_build(path: str | Path) -> BuildSpec:
         spec = StageSpec(**check_table(StageSpec, table, f"{src}: [{stage}]", ValueError))
         for key in ("data", "val"):
             for ref in getattr(spec, key):
+                if ":" in ref and (stage, key) != ("corner", "data"):
+                    raise ValueError(
+                        f"{src}: [{stage}].{key}: shares (name:share) are for [corner].data only"
+                    )
                 if ref.split(":")[0] not in names:
                     raise ValueError(
                         f"{src}: [{stage}].{key}: {ref!r} names no dataset of the build"

@@ -257,16 +257,13 @@ def train_detector(
 
 
 def data_sources(data) -> list[tuple[Path, float]]:
-    """(folder, share) of each training source: a path, or a list of paths and (path, share).
+    """(folder, share) of each training source: a path, or a list of paths and (path, share)
+    pairs.
 
     Raises:
         ValueError: a share that is not a number > 0.
     """
-    items = (
-        data
-        if isinstance(data, list | tuple) and not isinstance(data[0], str | float | int)
-        else [data]
-    )
+    items = list(data) if isinstance(data, list) else [data]
     out = []
     for item in items:
         path, share = (item, 1.0) if isinstance(item, str | Path) else item
