@@ -127,6 +127,13 @@ class TrainConfig:
     """Cost per radian, every step, that the next gate lies outside the free cone around the
     camera's axis (≥ 0; None: the reward preset's, 0.05 for racing-line), so the policy keeps
     the gate in view at the price of some speed."""
+    crash_cost: float | None = None
+    """Cost of a crash (≥ 0; None: the reward preset's, 10). With a discount of 0.99 at 50 Hz
+    the future a crash forfeits counts for about two seconds, so this weight sets how much margin
+    the policy keeps from frames and ground."""
+    center_reward: float | None = None
+    """Reward per gate passed through its centre, falling linearly to 0 at the opening's edge
+    (≥ 0; None: the preset's, 0)."""
     observation: str = "basic"
     """"basic" (15-D) or "extended" (21-D: adds the next gate's direction and the gate after)."""
     max_episode_s: float | None = None
@@ -160,6 +167,10 @@ class TrainConfig:
             base = replace(base, time=base.time - self.time_cost)
         if self.perception_cost is not None:
             base = replace(base, perception=-self.perception_cost)
+        if self.crash_cost is not None:
+            base = replace(base, crash=-self.crash_cost)
+        if self.center_reward is not None:
+            base = replace(base, center=self.center_reward)
         return base
 
 
@@ -203,6 +214,8 @@ def validate_train_config(c: TrainConfig) -> None:
         ("init_critic_steps", c.init_critic_steps >= 0),
         ("time_cost", c.time_cost >= 0),
         ("perception_cost", c.perception_cost is None or c.perception_cost >= 0),
+        ("crash_cost", c.crash_cost is None or c.crash_cost >= 0),
+        ("center_reward", c.center_reward is None or c.center_reward >= 0),
         ("randomization.mass_pct", 0 <= c.randomization.mass_pct < 1),
         ("randomization.thrust_pct", 0 <= c.randomization.thrust_pct < 1),
         ("randomization.motor_tau_pct", 0 <= c.randomization.motor_tau_pct < 1),

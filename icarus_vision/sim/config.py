@@ -37,6 +37,9 @@ class RewardConfig:
     """Per rad/s of body-rate magnitude, every step (a negative value is a smoothness cost)."""
     action_change: float = 0.0
     """Per unit of squared change of the action since the previous step."""
+    center: float = 0.0
+    """Per gate passed, times how central the passage was: 1 through the centre, 0 at the
+    opening's edge (1 − max(|y|, |z|) / half the opening), so margin from the frame pays."""
 
 
 PROGRESS_REWARD = RewardConfig()

@@ -274,7 +274,8 @@ class RaceCore:
         prev_dist = np.linalg.norm(gpos - p0, axis=1)
         to_gate = gpos - state.pos
         dist = np.linalg.norm(to_gate, axis=1)
-        passed = rules.gate_passage(p0, state.pos, gpos, gyaw, gsize) & active
+        passed, centrality = rules.gate_crossing(p0, state.pos, gpos, gyaw, gsize)
+        passed &= active
         pts = trail if trail is not None else state.pos[None]
         oob = rules.out_of_bounds(pts, self.bounds_lo, self.bounds_hi).any(axis=0)
         ground = ground_hit & self.taken_off
@@ -293,6 +294,8 @@ class RaceCore:
             extra["camera_angle"] = camera_gate_angle(quat_to_rot(state.quat), to_gate, uptilt)
         if w.rates:
             extra["omega"] = state.omega
+        if w.center:
+            extra["centrality"] = np.where(passed, centrality, 0.0)
         if w.action_change:
             a = self.prev_action if action is None else action
             extra["action_change"] = cost_action_change(a, self.prev_action)

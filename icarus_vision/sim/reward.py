@@ -107,12 +107,14 @@ def compute_reward(
     camera_angle: np.ndarray | None = None,
     omega: np.ndarray | None = None,
     action_change: np.ndarray | None = None,
+    centrality: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Weighted sum of the named terms.
 
     The optional inputs are needed only when their term's weight is non-zero: ``line`` (N,) from
     ``reward_line``, ``camera_angle`` (N,) from ``camera_gate_angle``, ``omega`` (N, 3) body rates,
-    ``action_change`` (N,) from ``cost_action_change``.
+    ``action_change`` (N,) from ``cost_action_change``, ``centrality`` (N,) from
+    ``rules.gate_crossing`` (0 where no gate was passed).
 
     Returns:
         reward: (N,) float64.
@@ -138,5 +140,7 @@ def compute_reward(
         terms["rates"] = cfg.rates * cost_rates(omega)
     if cfg.action_change:
         terms["action_change"] = cfg.action_change * action_change
+    if cfg.center:
+        terms["center"] = cfg.center * centrality
     total = sum(terms.values())
     return total, terms

@@ -172,3 +172,12 @@ def test_perception_cost_replaces_the_presets_weight():
     assert replace(SPECIALIST, perception_cost=0.5).reward_config().perception == -0.5
     with pytest.raises(ValueError, match="perception_cost"):
         config_from_dict({"perception_cost": -0.1})
+
+
+def test_crash_cost_and_center_reward_replace_the_presets_weights():
+    assert SPECIALIST.reward_config().crash == -10.0 and SPECIALIST.reward_config().center == 0.0
+    r = replace(SPECIALIST, crash_cost=30.0, center_reward=5.0).reward_config()
+    assert (r.crash, r.center) == (-30.0, 5.0)
+    for key in ("crash_cost", "center_reward"):
+        with pytest.raises(ValueError, match=key):
+            config_from_dict({key: -1.0})

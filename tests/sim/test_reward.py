@@ -102,3 +102,31 @@ def test_line_progress_stops_at_the_gate_plane():
     assert across == pytest.approx([0.5])
     back = reward_line(np.array([[11.0, 3, 2]]), np.array([[9.0, 3, 2]]), seg_from, gate)
     assert back == pytest.approx([-1.0])
+
+
+def test_center_term_pays_a_central_passage_only_when_weighted():
+    from dataclasses import replace
+
+    cfg = replace(RACING_LINE_REWARD, center=5.0)
+    _, terms = _terms(cfg, passed=np.array([True]), centrality=np.array([0.8]))
+    assert terms["center"][0] == pytest.approx(4.0)
+    _, terms = _terms(RACING_LINE_REWARD, passed=np.array([True]), centrality=np.array([0.8]))
+    assert "center" not in terms
+
+
+def test_env_pays_the_center_term_on_a_gate_passage():
+    """A drone that flies straight through a gate's centre earns the whole center weight."""
+    from dataclasses import replace
+
+    from icarus_vision.sim.track import Gate, Track
+
+    track = Track(name="one", gates=(Gate((2.0, 0.0, 1.0)),), start_pos=(0.0, 0.0, 1.0))
+    cfg = EnvConfig(track=track, reward=replace(RACING_LINE_REWARD, center=5.0))
+    env = BatchedRacingVecEnv(1, cfg, info_mode="full")
+    env.seed(0)
+    env.reset()
+    env.state.pos[0] = [1.95, 0.0, 1.0]
+    env.state.vel[0] = [5.0, 0.0, 0.0]
+    _, _, done, infos = env.step(np.array([[0.0, 0.0, 0.0, 0.0]]))
+    assert done[0] and infos[0]["all_gates_passed"]
+    assert infos[0]["reward_terms"]["center"] == pytest.approx(5.0, abs=0.1)

@@ -185,3 +185,14 @@ def test_frame_collision_threshold(radius_margin, hit):
         np.ones((1, 1), bool),
     )
     assert bool(got[0]) == hit
+
+
+def test_crossing_centrality_falls_from_the_centre_to_the_edge():
+    """1 through the centre, 1 − max(|y|, |z|) / half the opening elsewhere, 0 without a passage."""
+    p0 = np.array([[4.9, 0, 2], [4.9, 0.25, 2.1], [4.9, 0.1, 2.45], [4.9, 0.6, 2], [4.0, 0, 2]])
+    p1 = p0 + [0.2, 0, 0]
+    gate = np.tile([5.0, 0, 2], (5, 1))
+    passed, central = rules.gate_crossing(p0, p1, gate, np.zeros(5), np.ones(5))
+    assert passed.tolist() == [True, True, True, False, False]
+    assert central == pytest.approx([1.0, 0.5, 0.1, 0.0, 0.0])
+    assert passed.tolist() == rules.gate_passage(p0, p1, gate, np.zeros(5), np.ones(5)).tolist()

@@ -1,0 +1,119 @@
+"""Where a policy fails on race layouts: the gate it was flying to, by the gate's shape and place.
+
+    .venv/bin/python benchmarks/policy_failures.py [--policy default] [--episodes 300]
+        [--seed 5000] [--gates 10] [--difficulty 1.0] [--json PATH]
+
+Flies ``--episodes`` random race layouts (ground truth, randomisation on: the finish-rate setting of
+``policy_speed.py``) and, for every gate the policy flew to, records whether it got through. Prints
+the failure rate per gate (failures at a gate / gates attempted) by the gate's opening size, its
+angle off the approach (the direction from the previous passage), the height change and the turn
+it asks for, and how each failed episode ended (gate collision, ground, out of bounds, time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+
+import numpy as np
+
+from icarus_vision.policy.pilots import resolve_policy
+from icarus_vision.sim.config import EnvConfig, RandomizationConfig
+from icarus_vision.sim.vec_env import BatchedRacingVecEnv
+
+BUCKETS = {
+    "size_m": (0.8, 1.0, 1.2, 1.51),
+    "off_approach_deg": (0, 15, 30, 45, 61),
+    "climb_m": (-3.01, -1.5, -0.5, 0.5, 1.5, 3.01),
+    "turn_deg": (0, 30, 60, 90, 180.1),
+    "approach_m": (0, 3, 6, 10, 30),
+}
+
+
+def gate_properties(track) -> list[dict]:
+    """Per passage: opening size, angle off the approach, climb, turn from the previous leg."""
+    ps = track.passages
+    start = np.array(track.start_pos, float)
+    out = []
+    prev_dir = np.array([np.cos(np.radians(track.start_yaw_deg)), np.sin(np.radians(track.start_yaw_deg))])
+    prev = start
+    for g in ps:
+        p = np.array(g.pos, float)
+        leg = p - prev
+        d = leg[:2] / max(np.linalg.norm(leg[:2]), 1e-6)
+        off = np.degrees(np.arccos(np.clip(d @ g.normal[:2], -1, 1)))
+        turn = np.degrees(np.arccos(np.clip(d @ prev_dir, -1, 1)))
+        out.append({
+            "size_m": g.size, "off_approach_deg": off, "climb_m": leg[2],
+            "turn_deg": turn, "approach_m": float(np.linalg.norm(leg)),
+        })  # fmt: skip
+        prev, prev_dir = p, g.normal[:2]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--policy", default="default")
+    ap.add_argument("--episodes", type=int, default=300)
+    ap.add_argument("--seed", type=int, default=5000)
+    ap.add_argument("--gates", type=int, default=10)
+    ap.add_argument("--difficulty", type=float, default=1.0)
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args()
+
+    policy = resolve_policy(a.policy)
+    cfg = EnvConfig(
+        random_tracks=True, num_gates=a.gates, layout_difficulty=a.difficulty,
+        observation=policy.observation, randomization=RandomizationConfig(enabled=True),
+    )  # fmt: skip
+    env = BatchedRacingVecEnv(a.episodes, cfg)
+    env.seed(a.seed)
+    obs = env.reset()
+    tracks = list(env.core.tracks)
+    results: list[dict | None] = [None] * a.episodes
+    while any(r is None for r in results):
+        obs, _, done, infos = env.step(policy.act(obs))
+        for i in np.flatnonzero(done):
+            if results[i] is None:
+                info = infos[i]
+                results[i] = {
+                    "track": tracks[i], "passed": info["gates_passed"],
+                    "total": info["gates_total"], "reason": info["crash_reason"] or "time",
+                    "success": info["all_gates_passed"] and not info["crashed"],
+                }  # fmt: skip
+        tracks = list(env.core.tracks)
+
+    attempted = defaultdict(lambda: defaultdict(int))
+    failed = defaultdict(lambda: defaultdict(int))
+    reasons = defaultdict(int)
+    for r in results:
+        props = gate_properties(r["track"])
+        for k, p in enumerate(props[: r["passed"] + 1]):
+            fail = (not r["success"]) and k == r["passed"]
+            for name, edges in BUCKETS.items():
+                b = int(np.clip(np.searchsorted(edges, p[name], side="right") - 1, 0, len(edges) - 2))
+                label = f"{edges[b]:g}..{edges[b + 1]:g}"
+                attempted[name][label] += 1
+                failed[name][label] += fail
+        if not r["success"]:
+            reasons[r["reason"]] += 1
+    n_ok = sum(r["success"] for r in results)
+    print(f"policy {a.policy}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)")
+    print("failed episodes by ending:", dict(reasons))
+    report = {"finished": n_ok, "episodes": a.episodes, "endings": dict(reasons), "per_gate": {}}
+    for name in BUCKETS:
+        print(f"\n{name}: failure per gate attempted")
+        rows = {}
+        for label in attempted[name]:
+            n, f = attempted[name][label], failed[name][label]
+            rows[label] = {"attempted": n, "failed": f, "rate": f / n}
+            print(f"  {label:>12}: {f:4d} / {n:5d} = {100 * f / n:5.1f} %")
+        report["per_gate"][name] = rows
+    if a.json:
+        with open(a.json, "w") as fh:
+            json.dump(report, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
