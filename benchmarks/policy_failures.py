@@ -36,7 +36,9 @@ def gate_properties(track) -> list[dict]:
     ps = track.passages
     start = np.array(track.start_pos, float)
     out = []
-    prev_dir = np.array([np.cos(np.radians(track.start_yaw_deg)), np.sin(np.radians(track.start_yaw_deg))])
+    prev_dir = np.array(
+        [np.cos(np.radians(track.start_yaw_deg)), np.sin(np.radians(track.start_yaw_deg))]
+    )
     prev = start
     for g in ps:
         p = np.array(g.pos, float)
@@ -92,7 +94,9 @@ def main() -> None:
         for k, p in enumerate(props[: r["passed"] + 1]):
             fail = (not r["success"]) and k == r["passed"]
             for name, edges in BUCKETS.items():
-                b = int(np.clip(np.searchsorted(edges, p[name], side="right") - 1, 0, len(edges) - 2))
+                b = int(
+                    np.clip(np.searchsorted(edges, p[name], side="right") - 1, 0, len(edges) - 2)
+                )
                 label = f"{edges[b]:g}..{edges[b + 1]:g}"
                 attempted[name][label] += 1
                 failed[name][label] += fail
