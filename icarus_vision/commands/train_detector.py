@@ -97,18 +97,14 @@ def print_best(epoch: int, m: dict, out: Path, files: str) -> None:
 def parse_data(values: list[str]) -> list[tuple[Path, float]]:
     """``--data DIR[:SHARE]`` (repeatable) -> (folder, share) pairs; a folder whose name ends in
     ``:`` and a number is read as DIR:SHARE."""
+    from icarus_vision.dataset.layout import split_share
+
     out = []
     for v in values:
-        head, sep, tail = v.rpartition(":")
-        try:
-            share = float(tail) if sep else 1.0
-        except ValueError:
-            head, share = v, 1.0
-        else:
-            head = head if sep else v
-        if not share > 0:
+        head, share = split_share(v)
+        if share is not None and not share > 0:
             raise ValueError(f"--data {v}: the share after ':' must be a number > 0")
-        out.append((Path(head), share))
+        out.append((Path(head), 1.0 if share is None else share))
     return out
 
 

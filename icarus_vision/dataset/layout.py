@@ -95,3 +95,15 @@ def image_file_name(image_id: int) -> str:
 def shard_path(out_dir: Path, spec: ShardSpec) -> Path:
     """Path of a shard's record."""
     return Path(out_dir) / SHARDS / f"{spec.name}.json"
+
+
+def split_share(ref: str) -> tuple[str, float | None]:
+    """``NAME:SHARE`` -> (NAME, SHARE); a reference that does not end in ``:`` and a number is a
+    name alone -> (ref, None)."""
+    head, sep, tail = ref.rpartition(":")
+    if sep:
+        try:
+            return head, float(tail)
+        except ValueError:
+            pass
+    return ref, None

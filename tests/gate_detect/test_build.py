@@ -124,6 +124,14 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
             "[refiner]\ndata = ['a:2']\n",
             "for [corner].data only",
         ),
+        (  # caught when the file is read, not after hours of rendering
+            "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a:0']\n",
+            "a share must be > 0",
+        ),
+        (
+            "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a:x']\n",
+            "names no dataset",
+        ),
         (
             "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\n"
             "[refiner]\ndata = ['a']\n[zoom]\nkeep = 'shipped'\n",

@@ -45,6 +45,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from icarus_vision.dataset.layout import split_share
 from icarus_vision.fileio import atomic_write_json, read_toml
 from icarus_vision.validation import check_table, require_list, require_table
 
@@ -119,14 +120,17 @@ def load_build(path: str | Path) -> BuildSpec:
         spec = StageSpec(**check_table(StageSpec, table, f"{src}: [{stage}]", ValueError))
         for key in ("data", "val"):
             for ref in getattr(spec, key):
-                if ":" in ref and (stage, key) != ("corner", "data"):
+                name, share = split_share(ref)
+                if share is not None and (stage, key) != ("corner", "data"):
                     raise ValueError(
                         f"{src}: [{stage}].{key}: shares (name:share) are for [corner].data only"
                     )
-                if ref.split(":")[0] not in names:
+                if name not in names:
                     raise ValueError(
                         f"{src}: [{stage}].{key}: {ref!r} names no dataset of the build"
                     )
+                if share is not None and not (0 < share < math.inf):
+                    raise ValueError(f"{src}: [{stage}].{key}: {ref!r}: a share must be > 0")
         if spec.epochs < 1:
             raise ValueError(f"{src}: [{stage}].epochs: must be >= 1")
         if spec.keep and stage not in ("refiner", "zoom", "rescorer"):
@@ -281,8 +285,8 @@ def graft(corner: Path, source: Path, out: Path, stages: list[str]) -> Path:
 def _sources(refs, data: dict[str, Path]) -> list:
     out = []
     for ref in refs:
-        name, _, share = ref.partition(":")
-        out.append((data[name], float(share)) if share else data[name])
+        name, share = split_share(ref)
+        out.append(data[name] if share is None else (data[name], share))
     return out
 
 
