@@ -13,11 +13,11 @@ it asks for, and how each failed episode ended (gate collision, ground, out of b
 from __future__ import annotations
 
 import argparse
-import json
 from collections import defaultdict
 
 import numpy as np
 
+from icarus_vision.fileio import atomic_write_json
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
@@ -115,8 +115,7 @@ def main() -> None:
             print(f"  {label:>12}: {f:4d} / {n:5d} = {100 * f / n:5.1f} %")
         report["per_gate"][name] = rows
     if a.json:
-        with open(a.json, "w") as fh:
-            json.dump(report, fh, indent=1)
+        atomic_write_json(a.json, report)
 
 
 if __name__ == "__main__":

@@ -55,14 +55,13 @@ def _summary(reports: list[dict]) -> dict:
     }
 
 
-RECIPE = "gates-v1"
-"""The look ``race --randomize`` draws the world from (``--recipe``; none: the default look)."""
-
-
-def builtin(seeds: int, detector: str, policy: str = "default", backend: str = "pybullet") -> dict:
+def builtin(
+    seeds: int, detector: str, policy: str = "default", backend: str = "pybullet",
+    recipe: str | None = "gates-v1",
+) -> dict:  # fmt: skip
     out = {}
     for name in BUILTIN_TRACKS:
-        reports = [run_race(name, detector=detector, policy=policy, seed=s, randomize=True, recipe=RECIPE,
+        reports = [run_race(name, detector=detector, policy=policy, seed=s, randomize=True, recipe=recipe,
                             backend=backend).report
                    for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
         out[name] = _summary(reports)
@@ -71,18 +70,20 @@ def builtin(seeds: int, detector: str, policy: str = "default", backend: str = "
     return out
 
 
-def specialists(seeds: int) -> dict:
+def specialists(seeds: int, recipe: str | None = "gates-v1") -> dict:
     out = {}
     for name in ("grand-prix", "split-s"):
         for det in ("oracle", "cnn"):
-            reports = [run_race(name, detector=det, policy="auto", seed=s, randomize=True, recipe=RECIPE).report
+            reports = [run_race(name, detector=det, policy="auto", seed=s, randomize=True, recipe=recipe).report
                        for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
             out[f"{name}/{det}"] = _summary(reports)
             print(name, det, out[f"{name}/{det}"], flush=True)
     return out
 
 
-def vision(tracks: int, difficulty: float, policy: str = "default") -> dict:
+def vision(
+    tracks: int, difficulty: float, policy: str = "default", recipe: str | None = "gates-v1"
+) -> dict:
     out = {}
     for det in ("oracle", "cnn"):
         reports = []
@@ -95,7 +96,7 @@ def vision(tracks: int, difficulty: float, policy: str = "default") -> dict:
                     policy=policy,
                     seed=SEED0 + i,
                     randomize=True,
-                    recipe=RECIPE,
+                    recipe=recipe,
                 ).report
             )
         out[det] = _summary(reports)
@@ -105,7 +106,6 @@ def vision(tracks: int, difficulty: float, policy: str = "default") -> dict:
 
 
 def main() -> None:
-    global RECIPE
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("what", choices=["builtin", "specialists", "vision"])
     ap.add_argument("--seeds", type=int, default=20)
@@ -119,16 +119,16 @@ def main() -> None:
                     help="the look race --randomize draws (gates-v1, gates-v3, a path, or none)")  # fmt: skip
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
-    RECIPE = None if args.recipe == "none" else args.recipe
+    recipe = None if args.recipe == "none" else args.recipe
     t0 = time.perf_counter()
     if args.what == "builtin":
-        out = builtin(args.seeds, args.detector, args.policy, args.backend)
+        out = builtin(args.seeds, args.detector, args.policy, args.backend, recipe)
         out["backend"], out["policy_asked"] = args.backend, args.policy
     elif args.what == "specialists":
-        out = specialists(args.seeds)
+        out = specialists(args.seeds, recipe)
     else:
-        out = vision(args.tracks, args.difficulty, args.policy)
-    out["wall_s"], out["recipe"] = round(time.perf_counter() - t0, 1), RECIPE
+        out = vision(args.tracks, args.difficulty, args.policy, recipe)
+    out["wall_s"], out["recipe"] = round(time.perf_counter() - t0, 1), recipe
     print(json.dumps(out, indent=1))
     if args.json:
         atomic_write_json(args.json, out)

@@ -15,11 +15,11 @@ that is not there is skipped (the script says so).
 from __future__ import annotations
 
 import argparse
-import json
 import tempfile
 from pathlib import Path
 
 from icarus_vision.dataset.importers import import_gates
+from icarus_vision.fileio import atomic_write_json
 from icarus_vision.gate_detect.evaluate import eval_detector
 
 SETS = {
@@ -61,7 +61,7 @@ def main() -> None:
                   f"{row['corner_error_median_px']} px = "
                   f"{'-' if rel is None else f'{100 * rel:.1f}'} % of the side")  # fmt: skip
     if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1))
+        atomic_write_json(args.json, out)
 
 
 if __name__ == "__main__":
