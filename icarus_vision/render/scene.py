@@ -206,7 +206,7 @@ class Scene:
     def _add_figure(self, d: Distractor) -> int:
         """A person, tree, net or banner (:class:`Distractor`); the first part's body id."""
         sx, sy, sz = d.size
-        x, y, z = d.pos
+        x, y = d.pos[:2]
         yaw = math.radians(d.yaw_deg)
         if d.shape == "banner":
             return self._add_mesh(box_mesh((0, 0, 0), (sz / 2, sx / 2, sy / 2), d.material.tile_m),
@@ -218,33 +218,18 @@ class Scene:
             parts += [box_mesh((0, 0, zz), (bar, sx / 2, bar), 1.0, long_axis=1)
                       for zz in np.arange(-sy / 2, sy / 2 + 1e-9, sz)]  # fmt: skip
             return self._add_mesh(Mesh.concat(parts), d.material, d.pos, yaw)
-        if d.shape == "person":  # a body, a head above it
-            body = self._add_distractor(
-                Distractor(
-                    "cylinder",
-                    (x, y, 0.44 * sz),
-                    (sx / 2, sx / 2, 0.88 * sz),
-                    d.yaw_deg,
-                    d.material,
-                )  # fmt: skip
-            )
-            head = 0.07 * sz
-            self._add_distractor(Distractor("sphere", (x, y, 0.88 * sz + head), (head, head, head),
-                                            d.yaw_deg, d.material2 or d.material))  # fmt: skip
-            return body
-        trunk = self._add_distractor(  # a tree: a trunk and a crown
-            Distractor(
-                "cylinder",
-                (x, y, 0.3 * sz),
-                (0.06 * sz, 0.06 * sz, 0.6 * sz),
-                d.yaw_deg,
-                d.material,
-            )  # fmt: skip
-        )
-        r = sx / 2
-        self._add_distractor(Distractor("sphere", (x, y, sz - r), (r, r, r), d.yaw_deg,
+        # a person: a body, a head above it; a tree: a trunk, a crown on top
+        if d.shape == "person":
+            stem_r, stem_h, r = sx / 2, 0.88 * sz, 0.07 * sz
+            top = stem_h + r
+        else:
+            stem_r, stem_h, r = 0.06 * sz, 0.6 * sz, sx / 2
+            top = sz - r
+        stem = self._add_distractor(Distractor("cylinder", (x, y, stem_h / 2),
+                                               (stem_r, stem_r, stem_h), d.yaw_deg, d.material))  # fmt: skip
+        self._add_distractor(Distractor("sphere", (x, y, top), (r, r, r), d.yaw_deg,
                                         d.material2 or d.material))  # fmt: skip
-        return trunk
+        return stem
 
     def _add_hall(self, hall) -> None:
         """Walls, ceiling, ceiling lights, trusses and banners of an indoor hall (:class:`Hall`);
