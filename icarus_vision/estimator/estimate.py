@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from icarus_vision.sim.track import DEFAULT_GATE_SIZE
+
 NO_GATE_DISTANCE = 5.0
 """Map-free, before any gate is seen: the estimate points this far straight ahead (m), uncertain."""
 NO_GATE_SIGMA = 10.0
@@ -27,6 +29,7 @@ class GateEstimate:
         yaw: heading of the passage direction, rad; yaw_sigma: its standard deviation, rad.
         measured: the next gate was updated by a detection in this call.
         since_seen_s: time since the next gate was last measured, s (inf if never).
+        size: side of the next gate's opening, m (the map's, or the size PnP assumes map-free).
     """
 
     t: float
@@ -42,6 +45,7 @@ class GateEstimate:
     yaw_sigma: float
     measured: bool
     since_seen_s: float
+    size: float = DEFAULT_GATE_SIZE
 
 
 def fill_observation(obs: np.ndarray, estimate: GateEstimate, frame: str = "world") -> np.ndarray:

@@ -120,6 +120,14 @@ class GateEstimator:
         j = min(self.target + 1, len(self.passage_gate) - 1)
         return self.tracks[self.passage_gate[j]].pos.copy()
 
+    def gate_after_yaw(self) -> float | None:
+        """Map-aided: the estimated passage heading (rad) of the gate after the next one (the last
+        gate repeats at the end of the course); None in map-free mode."""
+        if self.config.mode != "map-aided" or not self.passage_gate:
+            return None
+        j = min(self.target + 1, len(self.passage_gate) - 1)
+        return self._heading(self.passage_gate[j], self.passage_yaw[j])
+
     # -- prediction and gate switching ---------------------------------------------------------
     def _advance(self, odom: OdometryReading) -> None:
         check_odometry(odom)
@@ -147,13 +155,15 @@ class GateEstimator:
             return self.passage_gate[min(self.target, len(self.passage_gate) - 1)]
         return self._target_gate
 
-    def _heading(self, gate: int) -> float:
-        """Passage heading of a gate track: its axis turned toward the expected direction."""
-        ref = (
-            self.passage_yaw[min(self.target, len(self.passage_yaw) - 1)]
-            if self.config.mode == "map-aided"
-            else self._target_heading
-        )
+    def _heading(self, gate: int, ref: float | None = None) -> float:
+        """Passage heading of a gate track: its axis turned toward the expected direction ``ref``
+        (default: the target passage's)."""
+        if ref is None:
+            ref = (
+                self.passage_yaw[min(self.target, len(self.passage_yaw) - 1)]
+                if self.config.mode == "map-aided"
+                else self._target_heading
+            )
         axis = self.tracks[gate].mean[3]
         return float(ref + wrap_axis(axis - ref))
 
@@ -330,4 +340,5 @@ class GateEstimator:
             yaw_sigma=math.sqrt(tr.cov[3, 3]),
             measured=measured,
             since_seen_s=odom.t - tr.last_hit_t,
+            size=tr.size,
         )

@@ -13,6 +13,7 @@ from icarus_vision.sim.config import (
     RandomizationConfig,
     RewardConfig,
 )
+from icarus_vision.sim.observation import OBS_DIMS
 from icarus_vision.validation import check_table, require_table
 
 REWARD_PRESETS = ("progress", "racing", "racing-line")
@@ -135,7 +136,8 @@ class TrainConfig:
     """Reward per gate passed through its centre, falling linearly to 0 at the opening's edge
     (≥ 0; None: the preset's, 0)."""
     observation: str = "basic"
-    """"basic" (15-D) or "extended" (21-D: adds the next gate's direction and the gate after)."""
+    """"basic" (15-D), "extended" (21-D: adds the next gate's direction and the gate after) or
+    "racing" (25-D: adds the next gate's opening side and the gate after's direction)."""
     max_episode_s: float | None = None
     """Episode time limit; None: the environment default (5 s + 3 s per gate)."""
     track: str | None = None
@@ -207,7 +209,7 @@ def validate_train_config(c: TrainConfig) -> None:
             ),
         ),
         ("reward", c.reward in REWARD_PRESETS),
-        ("observation", c.observation in ("basic", "extended")),
+        ("observation", c.observation in OBS_DIMS),
         ("checkpoint_every", c.checkpoint_every >= 1),
         ("eval_every", c.eval_every >= 1),
         ("eval_episodes", c.eval_episodes >= 1),

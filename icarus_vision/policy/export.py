@@ -1,8 +1,8 @@
 """Exported policies: an MLP in safetensors plus a JSON description, loaded without pickles.
 
 Format ``icarus-policy-v1`` (two files side by side, ``NAME.safetensors`` and ``NAME.json``):
-the JSON names the observation (``basic`` 15-D or ``extended`` 21-D, gate vector in the world
-frame), the feature transform version, the hidden layers and activation, and the action semantics
+the JSON names the observation (``basic`` 15-D, ``extended`` 21-D or ``racing`` 25-D, gate
+vectors in the world frame), the feature transform version, the hidden layers and activation, and the action semantics
 (``ctbr``: [thrust, roll_rate, pitch_rate, yaw_rate] in [-1, 1]). Inference is plain numpy:
 features -> tanh MLP -> mean action, clipped to [-1, 1] (the deterministic policy).
 """
@@ -19,10 +19,10 @@ from safetensors.numpy import save as save_safetensors
 
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
 from icarus_vision.policy.features import FEATURES_VERSION, feature_dim, obs_to_features
+from icarus_vision.sim.observation import OBS_DIMS
 
 FORMAT = "icarus-policy-v1"
 ACTION = "ctbr"
-OBS_DIMS = {"basic": 15, "extended": 21}
 
 
 def _paths(path: str | Path) -> tuple[Path, Path]:
@@ -141,7 +141,11 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         )
     if desc.get("obs_dim") not in OBS_DIMS.values():
         raise ValueError(
-            f"{js}: observation of {desc.get('obs_dim')} entries does not match the 15-D or 21-D observation this simulator provides"
+            f"{js}: observation of {desc.get('obs_dim')} entries does not match the 15-D, 21-D or 25-D observations this simulator provides"
+        )
+    if OBS_DIMS.get(desc.get("observation")) != desc["obs_dim"]:
+        raise ValueError(
+            f"{js}: observation {desc.get('observation')!r} does not have {desc['obs_dim']} entries ({', '.join(f'{k} {v}' for k, v in OBS_DIMS.items())})"
         )
     if expect_obs_dim is not None and desc.get("obs_dim") != expect_obs_dim:
         raise ValueError(
@@ -165,33 +169,48 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
 def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
     """Copy an exported policy's actor into a fresh stable-baselines3 PPO model (fine-tuning).
 
+    A policy of a smaller observation than the run's (``basic`` into ``extended`` or ``racing``,
+    ``extended`` into ``racing``) starts with zero first-layer weights for the features it did not
+    read, so it flies as before until training finds a use for them (the features of a smaller
+    observation are the first ones of a larger: ``features.py``).
+
     Args:
         model: PPO with an MlpPolicy whose actor has the exported policy's hidden layers.
         spec: ``default`` (the shipped generalist), a shipped name, or a path to an exported policy.
-        observation: the run's observation (``basic`` or ``extended``), which the policy must read.
+        observation: the run's observation (``basic``, ``extended`` or ``racing``).
 
     Raises:
-        ValueError: the policy reads another observation or its layers differ from the model's.
+        ValueError: the policy reads a larger observation than the run's, or its layers differ
+            from the model's.
     """
     import torch
 
     from icarus_vision.policy.pilots import resolve_policy
 
-    policy = resolve_policy(spec, expect_obs_dim=OBS_DIMS[observation])
+    policy = resolve_policy(spec)
     if not isinstance(policy, ExportedPolicy):
         raise ValueError(f"cannot start training from {spec!r}: it is not an exported policy")
+    if policy.obs_dim > OBS_DIMS[observation]:
+        raise ValueError(
+            f"{policy.path}: it reads the {policy.observation} observation ({policy.obs_dim} entries), "
+            f"larger than this run's {observation} ({OBS_DIMS[observation]}); set observation = "
+            f"{policy.observation!r} in the config"
+        )
+    weights = list(policy.weights)
+    w0, b0 = weights[0]
+    missing = feature_dim(OBS_DIMS[observation]) - w0.shape[1]
+    weights[0] = (np.pad(w0, ((0, 0), (0, missing))), b0)
     pol = model.policy
     layers = [m for m in pol.mlp_extractor.policy_net if hasattr(m, "weight")]
     layers.append(pol.action_net)
-    if len(layers) != len(policy.weights) or any(
-        tuple(layer.weight.shape) != w.shape
-        for layer, (w, _) in zip(layers, policy.weights, strict=True)
+    if len(layers) != len(weights) or any(
+        tuple(layer.weight.shape) != w.shape for layer, (w, _) in zip(layers, weights, strict=True)
     ):
         raise ValueError(
             f"{policy.path}: its layers {policy.desc['hidden']} do not match this run's ppo.net_arch"
         )
     with torch.no_grad():
-        for layer, (w, b) in zip(layers, policy.weights, strict=True):
+        for layer, (w, b) in zip(layers, weights, strict=True):
             layer.weight.copy_(torch.from_numpy(w))
             layer.bias.copy_(torch.from_numpy(b))
     return policy

@@ -1,10 +1,13 @@
-"""The policy's fixed input transform: observation (N, 15 or 21) -> features (N, F).
+"""The policy's fixed input transform: observation (N, 15, 21 or 25) -> features (N, F).
 
 The policy reads the standard observation, whichever source filled it (ground truth or the
 estimator). This transform makes what it reads independent of where the track lies: world x, y are
 dropped, and velocity and gate vectors are turned into the drone's heading frame (rotation by −yaw,
 so "ahead" is +x whatever the track's orientation). Everything is scaled to order one and clipped.
 The same numpy function runs in training (``FeatureVecEnv``) and in the exported policy.
+
+Each layout's features start with those of the smaller one (16 ⊂ 21 ⊂ 24), so a policy can be
+fine-tuned on a larger observation by giving its first layer zero weights for the new features.
 """
 
 from __future__ import annotations
@@ -12,16 +15,19 @@ from __future__ import annotations
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
-BASIC_DIM, EXTENDED_DIM = 15, 21
+BASIC_DIM, EXTENDED_DIM, RACING_DIM = 15, 21, 25
 FEATURES_VERSION = "icarus-features-v1"
 POS_SCALE, VEL_SCALE, RATE_SCALE, CLIP = 5.0, 5.0, 5.0, 5.0
+SIZE_REF = 1.0
+"""Opening side (m) that the racing features read as 0 (they read the side minus this)."""
+_FEATURE_DIMS = {BASIC_DIM: 16, EXTENDED_DIM: 21, RACING_DIM: 24}
 
 
 def feature_dim(obs_dim: int) -> int:
-    """Number of features for an observation of ``obs_dim`` (15 or 21)."""
-    if obs_dim not in (BASIC_DIM, EXTENDED_DIM):
-        raise ValueError(f"observation must have 15 or 21 entries, got {obs_dim}")
-    return 16 if obs_dim == BASIC_DIM else 21
+    """Number of features for an observation of ``obs_dim`` (15, 21 or 25)."""
+    if obs_dim not in _FEATURE_DIMS:
+        raise ValueError(f"observation must have 15, 21 or 25 entries, got {obs_dim}")
+    return _FEATURE_DIMS[obs_dim]
 
 
 def _yaw_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -33,16 +39,18 @@ def obs_to_features(obs: np.ndarray) -> np.ndarray:
     """Features of world-frame observations.
 
     Args:
-        obs: (N, 15) or (N, 21) observations with world-frame gate vectors.
+        obs: (N, 15), (N, 21) or (N, 25) observations with world-frame gate vectors.
 
     Returns:
-        (N, 16) or (N, 21) float32: altitude, velocity (heading frame), roll, pitch, body rates,
-        next gate vector (heading frame), its distance, its unit direction; extended adds the gate's
-        passage direction (heading frame, x, y) and the following gate's vector (heading frame).
+        (N, 16), (N, 21) or (N, 24) float32: altitude, velocity (heading frame), roll, pitch, body
+        rates, next gate vector (heading frame), its distance, its unit direction; extended adds the
+        gate's passage direction (heading frame, x, y) and the following gate's vector (heading
+        frame); racing adds the gate's opening side (minus ``SIZE_REF``) and the following gate's
+        passage direction (heading frame, x, y).
     """
     obs = np.asarray(obs, dtype=np.float64)
     if obs.ndim != 2:
-        raise ValueError(f"obs must be (N, 15) or (N, 21), got shape {obs.shape}")
+        raise ValueError(f"obs must be (N, 15), (N, 21) or (N, 25), got shape {obs.shape}")
     feature_dim(obs.shape[1])
     yaw = obs[:, 8]
     c, s = np.cos(yaw), np.sin(yaw)
@@ -57,11 +65,13 @@ def obs_to_features(obs: np.ndarray) -> np.ndarray:
         dist / POS_SCALE,
         gate / np.maximum(dist, 1e-3),
     ]
-    if obs.shape[1] == EXTENDED_DIM:
+    if obs.shape[1] >= EXTENDED_DIM:
         parts += [
             _yaw_frame(obs[:, 15:18], c, s)[:, :2],
             _yaw_frame(obs[:, 18:21], c, s) / POS_SCALE,
         ]
+    if obs.shape[1] == RACING_DIM:
+        parts += [obs[:, 21:22] - SIZE_REF, _yaw_frame(obs[:, 22:25], c, s)[:, :2]]
     return np.clip(np.concatenate(parts, axis=1), -CLIP, CLIP).astype(np.float32)
 
 

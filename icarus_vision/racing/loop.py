@@ -25,6 +25,7 @@ from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.render.camera import Camera
 from icarus_vision.render.randomize import Visuals, apply_sensor_noise
 from icarus_vision.sim.dynamics import quat_to_rpy
+from icarus_vision.sim.observation import OBS_DIMS
 from icarus_vision.sim.track import Track
 
 
@@ -92,8 +93,8 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
     Args:
         pilot: ``f(obs (obs_dim,), gate_yaw) -> action (4,)``; gate_yaw is the next gate's heading
             (estimated, or true with the oracle).
-        obs_dim: 15 (basic) or 21 (extended: the gate direction and the gate after come from the
-            estimator's map, which vision keeps corrected).
+        obs_dim: 15 (basic), 21 (extended) or 25 (racing): the gate direction, the gate after and
+            the opening side come from the estimator's map, which vision keeps corrected.
         prior: the estimator's map of the track (the nominal layout: with randomisation the real
             gates are displaced from it and vision must correct them).
         detector: a detector spec (``cnn[:PATH]``, ``opencv``, ``oracle``) or a built Detector.
@@ -140,9 +141,7 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
                     on_frame(rgb, dets, per.estimate, state)
             else:
                 per.step(od)
-            extra = (
-                _extended_from_estimate(per.estimate, per.estimator, od) if obs_dim == 21 else None
-            )
+            extra = extra_from_estimate(per.estimate, per.estimator, od, obs_dim)
             obs = observation_from(od, per.estimate.rel_world, extra)
         gate_yaw = float(core.target_gate()[1][0]) if oracle else per.estimate.yaw
         obs_full, _, term, trunc, info = env.step(pilot(obs, gate_yaw))
@@ -159,9 +158,20 @@ def camera_rate(env) -> float:
     return float(env.unwrapped.config.quad.camera.rate_hz)
 
 
-def _extended_from_estimate(est, estimator, od) -> np.ndarray:
-    """Extended observation slots 15:21 from the estimate: passage direction, gate after (map)."""
-    direction = np.array([np.cos(est.yaw), np.sin(est.yaw), 0.0])
+def extra_from_estimate(est, estimator, od, obs_dim: int) -> np.ndarray | None:
+    """Observation slots after 15 from the estimate: the passage direction and the gate after
+    (extended, 15:21), the opening side and the gate after's direction (racing, 21:25). The gate
+    after comes from the estimator's map; map-free, it repeats the next gate."""
+    if obs_dim == OBS_DIMS["basic"]:
+        return None
     after = estimator.gate_after_position() if hasattr(estimator, "gate_after_position") else None
     rel_after = (after - od.pos) if after is not None else est.rel_world
-    return np.concatenate((direction, rel_after))
+    parts = [_heading(est.yaw), rel_after]
+    if obs_dim == OBS_DIMS["racing"]:
+        after_yaw = estimator.gate_after_yaw() if hasattr(estimator, "gate_after_yaw") else None
+        parts += [[est.size], _heading(est.yaw if after_yaw is None else after_yaw)]
+    return np.concatenate(parts)
+
+
+def _heading(yaw: float) -> np.ndarray:
+    return np.array([np.cos(yaw), np.sin(yaw), 0.0])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from icarus_vision.sim.observation import OBS_DIMS
 from icarus_vision.sim.quad import QuadParams
 from icarus_vision.sim.track import Track
 
@@ -111,7 +112,8 @@ class EnvConfig:
     observation: str = "basic"
     """"basic": the 15-D observation. "extended": 21-D, the 15-D vector plus the next gate's
     passage direction (unit vector, 15:18) and the relative position of the gate after it (18:21),
-    both in the frame of ``gate_obs_frame``."""
+    both in the frame of ``gate_obs_frame``. "racing": 25-D, the extended vector plus the next
+    gate's opening side in metres (21) and the passage direction of the gate after it (22:25)."""
     reward: RewardConfig = field(default_factory=RewardConfig)
     """Reward weights."""
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
@@ -127,8 +129,10 @@ class EnvConfig:
             raise ValueError(
                 f"gate_obs_frame must be 'world' or 'body', got {self.gate_obs_frame!r}"
             )
-        if self.observation not in ("basic", "extended"):
-            raise ValueError(f"observation must be 'basic' or 'extended', got {self.observation!r}")
+        if self.observation not in OBS_DIMS:
+            raise ValueError(
+                f"observation must be one of {', '.join(OBS_DIMS)}, got {self.observation!r}"
+            )
         if self.layout_difficulty is not None and not 0.0 <= self.layout_difficulty <= 1.0:
             raise ValueError(
                 f"layout_difficulty must be in [0, 1] or None, got {self.layout_difficulty}"
@@ -138,7 +142,7 @@ class EnvConfig:
 
     @property
     def obs_dim(self) -> int:
-        return 15 if self.observation == "basic" else 21
+        return OBS_DIMS[self.observation]
 
     @property
     def substeps(self) -> int:

@@ -327,15 +327,21 @@ class RaceCore:
 
         With ``observation="extended"``, (N, 21): plus the next gate's passage direction and the
         relative position of the gate after it (the last gate repeats at the end of the course).
-        ``rpy`` (N, 3) may be passed when already computed for this state.
+        With ``observation="racing"``, (N, 25): plus the next gate's opening side and the gate
+        after's passage direction. ``rpy`` (N, 3) may be passed when already computed for this state.
         """
         rpy = quat_to_rpy(state.quat) if rpy is None else rpy
-        gpos, gyaw, _ = self.target_gate()
-        nxt = None
-        if self.cfg.observation == "extended":
+        gpos, gyaw, gsize = self.target_gate()
+        nxt = size = after_yaw = None
+        if self.cfg.observation != "basic":
+            rows = np.arange(self.n)
             j = np.minimum(self.target + 1, self.n_pass - 1)
-            nxt = self.g_pos[np.arange(self.n), j]
-        return observation_vector(state, rpy, gpos, gyaw, nxt, self.cfg.gate_obs_frame)
+            nxt = self.g_pos[rows, j]
+            if self.cfg.observation == "racing":
+                size, after_yaw = gsize, self.g_yaw[rows, j]
+        return observation_vector(
+            state, rpy, gpos, gyaw, nxt, self.cfg.gate_obs_frame, size, after_yaw
+        )
 
     def info(self, i: int, terms: dict, crash_code: int) -> dict:
         """The info dict of drone ``i`` for the step just taken."""

@@ -187,3 +187,35 @@ def test_observation_slots_world_and_body(two_gates):
     np.testing.assert_array_equal(w[:12], obs[:12])
     assert w.dtype == np.float32 and obs[12] == 12.0
     np.testing.assert_allclose(np.trace(e.cov_body), np.trace(e.cov_world))
+
+
+def test_racing_observation_slots_come_from_the_map():
+    """The racing observation's opening side and the gate after's heading come from the map; once
+    the first gate is passed, the last gate repeats as the gate after."""
+    from icarus_vision.racing.loop import extra_from_estimate
+
+    track = Track(
+        "sizes", (Gate((6.0, 0.0, 2.0), size=0.8), Gate((14.0, 1.0, 2.0), yaw_deg=30.0, size=1.4))
+    )
+    est = GateEstimator(CAM, EstimatorConfig(), track)
+    od = odom_at(0.0, [0.0, 0.0, 2.0])
+    first = est.predict(od)
+    assert first.size == pytest.approx(0.8)
+    assert est.gate_after_yaw() == pytest.approx(np.radians(30.0))
+    extra = extra_from_estimate(first, est, od, 25)
+    np.testing.assert_allclose(extra[:3], [1.0, 0.0, 0.0], atol=1e-9)  # the next gate's heading
+    np.testing.assert_allclose(extra[3:6], [14.0, 1.0, 0.0], atol=1e-9)  # the gate after
+    assert extra[6] == pytest.approx(0.8)
+    np.testing.assert_allclose(extra[7:], [np.cos(np.radians(30)), np.sin(np.radians(30)), 0.0])
+    assert extra_from_estimate(first, est, od, 21).shape == (6,)
+    assert extra_from_estimate(first, est, od, 15) is None
+    oracle = OracleDetector(track, CAM, sigma_px=0.5, seed=0)
+    after = _fly(est, oracle, 0.0, 3.0, 0.0, 9.0)[-1]
+    assert after.target == 1 and after.size == pytest.approx(1.4)
+    assert est.gate_after_yaw() == pytest.approx(np.radians(30.0), abs=0.05)
+    free = GateEstimator(CAM, EstimatorConfig(mode="map-free"))
+    est0 = free.predict(od)
+    assert free.gate_after_yaw() is None
+    np.testing.assert_allclose(
+        extra_from_estimate(est0, free, od, 25)[7:], extra_from_estimate(est0, free, od, 25)[:3]
+    )

@@ -23,7 +23,7 @@ class FakeModel:
         self.policy = self.model.policy
 
 
-@pytest.mark.parametrize("observation, dim", [("basic", 15), ("extended", 21)])
+@pytest.mark.parametrize("observation, dim", [("basic", 15), ("extended", 21), ("racing", 25)])
 def test_export_round_trip(tmp_path, observation, dim):
     fake = FakeModel(observation)
     path = export_sb3_policy(fake.model, tmp_path / "p", observation, {"name": "t"})
@@ -54,6 +54,10 @@ def test_load_errors_name_the_file_and_mismatch(tmp_path):
     desc["obs_dim"] = 17
     (tmp_path / "p.json").write_text(json.dumps(desc))
     with pytest.raises(ValueError, match="p.json: observation of 17 entries does not match"):
+        load_policy(path)
+    desc["obs_dim"] = 21
+    (tmp_path / "p.json").write_text(json.dumps(desc))
+    with pytest.raises(ValueError, match="observation 'basic' does not have 21 entries"):
         load_policy(path)
     desc["obs_dim"] = 15
     desc["action"] = "motor_speeds"

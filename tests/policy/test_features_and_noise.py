@@ -29,8 +29,30 @@ def test_features_do_not_depend_on_where_the_track_lies():
     shifted = obs.copy()
     shifted[:, 0:2] += 100.0  # world x, y are not features
     np.testing.assert_array_equal(obs_to_features(shifted), f)
-    with pytest.raises(ValueError, match="15 or 21"):
+    with pytest.raises(ValueError, match="15, 21 or 25"):
         obs_to_features(np.zeros((2, 14)))
+
+
+def test_racing_features_extend_the_extended_ones_and_turn_with_the_world():
+    rng = np.random.default_rng(1)
+    obs = rng.normal(0, 2, (20, 25)).astype(np.float32)
+    obs[:, 6:8] = rng.uniform(-0.5, 0.5, (20, 2))
+    yaw = rng.uniform(-np.pi, np.pi, (2, 20))
+    obs[:, 15:18] = np.stack((np.cos(yaw[0]), np.sin(yaw[0]), 0 * yaw[0]), axis=1)
+    obs[:, 22:25] = np.stack((np.cos(yaw[1]), np.sin(yaw[1]), 0 * yaw[1]), axis=1)
+    obs[:, 21] = rng.uniform(0.8, 1.5, 20)
+    f = obs_to_features(obs)
+    assert f.shape == (20, 24)
+    np.testing.assert_array_equal(f[:, :21], obs_to_features(obs[:, :21]))
+    np.testing.assert_allclose(f[:, 21], obs[:, 21] - 1.0, atol=1e-6)
+    # The gate after's direction in the heading frame: its yaw minus the drone's.
+    rel = yaw[1] - obs[:, 8]
+    np.testing.assert_allclose(f[:, 22:24], np.stack((np.cos(rel), np.sin(rel)), axis=1), atol=1e-5)
+    turned = rotate_world(obs, 0.7)
+    for sl in (slice(15, 18), slice(18, 21), slice(22, 25)):
+        c, s = np.cos(0.7), np.sin(0.7)
+        turned[:, sl] = obs[:, sl] @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T
+    np.testing.assert_allclose(obs_to_features(turned), f, atol=1e-5)
 
 
 def test_perception_noise_has_the_error_model_statistics():

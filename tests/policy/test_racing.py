@@ -107,8 +107,34 @@ def test_init_copies_the_exported_actor_and_refuses_mismatches():
     )
     with pytest.raises(ValueError, match="do not match"):
         load_init_actor(small, "default", "extended")
-    with pytest.raises(ValueError, match="observes"):
+    with pytest.raises(ValueError, match="larger than this run's basic"):
         load_init_actor(model, "default", "basic")
+
+
+def test_init_widens_a_smaller_observation_with_zero_weights():
+    """The shipped (extended) generalist fine-tuned on the racing observation flies as before,
+    whatever the new entries say, until training gives them weight."""
+    cfg = replace(
+        SPECIALIST, observation="racing", ppo=replace(SPECIALIST.ppo, num_envs=4, batch_size=64)
+    )
+    env = make_train_env(cfg, 4, 3, seed=0)
+    assert env.observation_space.shape == (24,)
+    model = PPO(
+        "MlpPolicy",
+        env,
+        policy_kwargs={"net_arch": [64, 64]},
+        device="cpu",
+        n_steps=8,
+        batch_size=32,
+    )
+    policy = load_init_actor(model, "default", "racing")
+    assert policy.observation == "extended"
+    obs = np.random.default_rng(1).normal(size=(16, 25)).astype(np.float32)
+    obs[:, 21] = np.random.default_rng(2).uniform(0.8, 1.5, 16)
+    mean, _ = model.predict(obs_to_features(obs), deterministic=True)
+    assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs[:, :21]), abs=1e-5)
+    w = model.policy.mlp_extractor.policy_net[0].weight.detach().numpy()
+    assert w.shape == (64, 24) and not w[:, 21:].any()
 
 
 def test_difficulty_curriculum_config_is_validated():

@@ -258,6 +258,36 @@ def test_extended_observation():
     assert vec.reset().shape == (2, 21)
 
 
+def test_racing_observation_adds_the_opening_and_the_gate_after_direction(tmp_path):
+    from icarus_vision.sim.track import Gate, Track
+
+    track = Track(
+        "sizes",
+        (
+            Gate((5.0, 0.0, 2.0), size=0.8),
+            Gate((10.0, 3.0, 2.5), yaw_deg=40.0, size=1.3),
+            Gate((14.0, 6.0, 2.0), yaw_deg=90.0, size=1.5),
+        ),
+        start_pos=(0.0, 0.0, 2.0),
+    )
+    env = BatchedDroneRacingEnv(track=track, observation="racing")
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (25,) and env.observation_space.shape == (25,)
+    ext, _ = BatchedDroneRacingEnv(track=track, observation="extended").reset(seed=0)
+    np.testing.assert_allclose(obs[:21], ext, atol=1e-6)
+    assert obs[21] == pytest.approx(0.8)
+    np.testing.assert_allclose(obs[22:25], track.gates[1].normal, atol=1e-6)
+    # Body frame: the direction turns with the drone, the opening side does not.
+    body, _ = BatchedDroneRacingEnv(track=track, observation="racing", gate_obs_frame="body").reset(
+        seed=0
+    )
+    assert body[21] == pytest.approx(0.8)
+    assert np.linalg.norm(body[22:25]) == pytest.approx(1.0, abs=1e-5)
+    assert BatchedRacingVecEnv(3, track=track, observation="racing").reset().shape == (3, 25)
+    with pytest.raises(ValueError, match="observation must be one of basic, extended, racing"):
+        EnvConfig(observation="full")
+
+
 def test_episode_reward_terms_sum_to_the_return():
     vec = BatchedRacingVecEnv(4, track="single-gate", max_episode_s=1.0)
     vec.seed(0)
