@@ -25,7 +25,7 @@ from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.render.camera import Camera
 from icarus_vision.render.randomize import Visuals, apply_sensor_noise
 from icarus_vision.sim.dynamics import quat_to_rpy
-from icarus_vision.sim.observation import OBS_DIMS
+from icarus_vision.sim.observation import OBS_DIMS, heading_vectors
 from icarus_vision.sim.track import Track
 
 
@@ -166,12 +166,9 @@ def extra_from_estimate(est, estimator, od, obs_dim: int) -> np.ndarray | None:
         return None
     after = estimator.gate_after_position() if hasattr(estimator, "gate_after_position") else None
     rel_after = (after - od.pos) if after is not None else est.rel_world
-    parts = [_heading(est.yaw), rel_after]
+    parts = [heading_vectors(np.array([est.yaw]))[0], rel_after]
     if obs_dim == OBS_DIMS["racing"]:
         after_yaw = estimator.gate_after_yaw() if hasattr(estimator, "gate_after_yaw") else None
-        parts += [[est.size], _heading(est.yaw if after_yaw is None else after_yaw)]
+        yaw = est.yaw if after_yaw is None else after_yaw
+        parts += [[est.size], heading_vectors(np.array([yaw]))[0]]
     return np.concatenate(parts)
-
-
-def _heading(yaw: float) -> np.ndarray:
-    return np.array([np.cos(yaw), np.sin(yaw), 0.0])

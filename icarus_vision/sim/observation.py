@@ -50,9 +50,9 @@ def observation_vector(
         raise ValueError("the racing observation needs next_gate_pos, gate_size and after_yaw")
     parts = [gate_pos - state.pos]
     if next_gate_pos is not None:
-        parts += [_heading(gate_yaw), next_gate_pos - state.pos]
+        parts += [heading_vectors(gate_yaw), next_gate_pos - state.pos]
     if after_yaw is not None:
-        parts.append(_heading(after_yaw))
+        parts.append(heading_vectors(after_yaw))
     if gate_obs_frame == "body":
         rot = quat_to_rot(state.quat)
         parts = [np.einsum("nji,nj->ni", rot, v) for v in parts]
@@ -63,9 +63,9 @@ def observation_vector(
     )
 
 
-def _heading(yaw: np.ndarray) -> np.ndarray:
+def heading_vectors(yaw: np.ndarray) -> np.ndarray:
     """(N, 3) horizontal unit vectors of the headings ``yaw`` (N,)."""
     return np.stack((np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)), axis=1)
 
 
-__all__ = ["OBS_DIM", "OBS_DIMS", "observation_vector"]
+__all__ = ["OBS_DIM", "OBS_DIMS", "heading_vectors", "observation_vector"]
