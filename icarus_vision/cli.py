@@ -55,6 +55,7 @@ def user_errors(fn):
             err_console.print(
                 f"[bold red]error:[/] {escape(str(e))}",
                 markup=True,
+                emoji=False,  # a path like DIR:x: stays as typed
                 highlight=False,
                 soft_wrap=True,
             )

@@ -3,6 +3,7 @@ labelled real images), mixed by share."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -94,17 +95,23 @@ def print_best(epoch: int, m: dict, out: Path, files: str) -> None:
     console.print(f"checkpoints written to {escape(str(out))}/ ({files})")
 
 
-def parse_data(values: list[str]) -> list[tuple[Path, float]]:
-    """``--data DIR[:SHARE]`` (repeatable) -> (folder, share) pairs; a folder whose name ends in
-    ``:`` and a number is read as DIR:SHARE."""
+def parse_data(values: list[str]) -> list[Path | tuple[Path, float]]:
+    """``--data DIR[:SHARE]`` (repeatable, every training command) -> each folder, as a path or,
+    where a share is given, (folder, share); a folder whose name ends in ``:`` and a number is
+    read as DIR:SHARE.
+
+    Raises:
+        ValueError: a share that is not a number > 0 (``DIR:x``, ``DIR:0``, ``DIR:-1``).
+    """
     from icarus_vision.dataset.layout import split_share
 
     out = []
     for v in values:
         head, share = split_share(v)
-        if share is not None and not share > 0:
+        unread = share is None and ":" in v and not Path(v).exists()
+        if unread or (share is not None and not 0 < share < math.inf):
             raise ValueError(f"--data {v}: the share after ':' must be a number > 0")
-        out.append((Path(head), 1.0 if share is None else share))
+        out.append(Path(head) if share is None else (Path(head), share))
     return out
 
 

@@ -13,11 +13,13 @@ from icarus_vision.commands.train_detector import print_best
 @app.command("train-refiner")
 @user_errors
 def train_refiner_cmd(
-    data: list[Path] = typer.Option(
+    data: list[str] = typer.Option(
         ...,
         help="gen-dataset output (train and val splits), ideally generated with a seed the "
-        "first stage was not trained on; repeat to train on several (the first one's val split "
-        "validates, unless --val).",
+        "first stage was not trained on, or a COCO-keypoints folder of labelled real images at "
+        "the camera's size (import-gates; training only); repeat to train on several (the first "
+        "one's val split validates, unless --val), each as DIR:SHARE for its share of the "
+        "training draws (e.g. --data renders:7 --data real:1).",
     ),
     val: list[Path] = typer.Option(
         None,
@@ -91,7 +93,7 @@ def train_refiner_cmd(
     reading, number of passes and the corner network's input size (--resume on a finished run
     only tunes again). Use the result with --detector cnn:OUT/best.
     """
-    from icarus_vision.commands.train_detector import parse_widths
+    from icarus_vision.commands.train_detector import parse_data, parse_widths
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
     from icarus_vision.gate_detect.cnn.refine import RefineConfig
     from icarus_vision.gate_detect.cnn.refine_train import RefineTrainConfig, train_refiner
@@ -101,7 +103,7 @@ def train_refiner_cmd(
             f"must be less than half the patch ({patch} px)", param_hint="--margin"
         )
     result = train_refiner(
-        SHIPPED if detector is None else detector, data, out, epochs=epochs, seed=seed,
+        SHIPPED if detector is None else detector, parse_data(data), out, epochs=epochs, seed=seed,
         resume=resume,
         config=RefineTrainConfig(candidate_scale=candidate_scale, candidate_iou=candidate_iou,
                                  lr=lr,

@@ -12,10 +12,12 @@ from icarus_vision.cli import app, console, user_errors
 @app.command("train-rescorer")
 @user_errors
 def train_rescorer_cmd(
-    data: list[Path] = typer.Option(
+    data: list[str] = typer.Option(
         ...,
-        help="gen-dataset output whose images the detector reads, ideally images none of its "
-        "networks was trained on; repeat to use several.",
+        help="gen-dataset output whose images the detector reads, or a COCO-keypoints folder of "
+        "labelled real images (import-gates; read as train), ideally images none of its "
+        "networks was trained on; repeat to use several, each as DIR:SHARE for its share of the "
+        "training draws (rows drawn by image; e.g. --data renders:7 --data real:1).",
     ),
     out: Path = typer.Option(
         ..., help="Output folder: the detector with the rescorer added, and candidates.npz."
@@ -49,6 +51,7 @@ def train_rescorer_cmd(
     complete detector checkpoint (the detector's files plus rescore.safetensors). Use it with
     --detector cnn:OUT.
     """
+    from icarus_vision.commands.train_detector import parse_data
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
     from icarus_vision.gate_detect.cnn.rescore import RescoreConfig
     from icarus_vision.gate_detect.cnn.rescore_train import RescoreTrainConfig, train_rescorer
@@ -63,7 +66,7 @@ def train_rescorer_cmd(
     if not names or not set(names) <= {"train", "val", "test"}:
         raise typer.BadParameter(f"--splits must name train, val or test, got {splits!r}")
     folder, history = train_rescorer(
-        SHIPPED if detector is None else detector, data, out, names,
+        SHIPPED if detector is None else detector, parse_data(data), out, names,
         RescoreConfig(hidden=units, threshold=threshold),
         RescoreTrainConfig(epochs=epochs, seed=seed, limit=limit),
         log=lambda s: console.print(s, highlight=False), backend=backend,

@@ -13,10 +13,12 @@ from icarus_vision.commands.train_detector import print_best
 @app.command("train-zoom")
 @user_errors
 def train_zoom_cmd(
-    data: list[Path] = typer.Option(
+    data: list[str] = typer.Option(
         ...,
-        help="gen-dataset output whose train split is trained on, ideally images the detector "
-        "was not trained on; repeat to train on several.",
+        help="gen-dataset output whose train split is trained on, or a COCO-keypoints folder of "
+        "labelled real images (import-gates), ideally images the detector was not trained on; "
+        "repeat to train on several, each as DIR:SHARE for its share of the training draws "
+        "(e.g. --data renders:7 --data real:1).",
     ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, zoom.onnx, tb/."),
     val: Path = typer.Option(
@@ -68,14 +70,14 @@ def train_zoom_cmd(
     from it. At the end, the smallest gate the stage reads is tuned on val. Use the result with
     --detector cnn:OUT/best.
     """
-    from icarus_vision.commands.train_detector import parse_widths
+    from icarus_vision.commands.train_detector import parse_data, parse_widths
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
     from icarus_vision.gate_detect.cnn.zoom import ZoomConfig
     from icarus_vision.gate_detect.cnn.zoom_train import ZoomTrainConfig, train_zoom
 
     result = train_zoom(
-        SHIPPED if detector is None else detector, data, out, val_dir=val, epochs=epochs,
-        seed=seed, resume=resume, config=ZoomTrainConfig(limit=limit, copies=copies, jitter=jitter,
+        SHIPPED if detector is None else detector, parse_data(data), out, val_dir=val,
+        epochs=epochs, seed=seed, resume=resume, config=ZoomTrainConfig(limit=limit, copies=copies, jitter=jitter,
                                wide_copies=wide_copies, wide_jitter=wide_jitter),
         zoom_config=ZoomConfig(
             patch=patch, extent=extent, widths=parse_widths(widths, 4), hidden=hidden

@@ -121,8 +121,8 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
         ("[colour]\n", "unknown table"),
         (
             "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\n"
-            "[refiner]\ndata = ['a:2']\n",
-            "for [corner].data only",
+            "[refiner]\ndata = ['a']\nval = ['a:2']\n",
+            "are for the data of",
         ),
         (  # caught when the file is read, not after hours of rendering
             "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a:0']\n",

@@ -12,6 +12,7 @@ stages to train, each stage starting from the checkpoint the one before it wrote
     images = 20000
     seed = 0
     [corner]                          # train-detector; data names datasets, "name:share" mixes
+                                      # (so does the data of refiner, zoom and rescorer)
     data = ["corner"]
     epochs = 40
     init = "shipped"                  # optional: fine-tune the shipped network (corner, refiner)
@@ -51,6 +52,8 @@ from icarus_vision.validation import check_table, require_list, require_table
 
 STAGES = ("corner", "refiner", "zoom", "rescorer", "quantize", "evaluate")
 """The build's steps after the datasets, in order."""
+TRAINING = ("corner", "refiner", "zoom", "rescorer")
+"""The stages whose ``data`` is training data: the ones that take shares (``name:share``)."""
 
 
 @dataclass(frozen=True)
@@ -65,8 +68,9 @@ class DatasetSpec:
 
 @dataclass(frozen=True)
 class StageSpec:
-    """One stage: its data (dataset names, ``name:share`` for the corner network), validation
-    data, epochs and the settings of its configuration dataclasses."""
+    """One stage: its data (dataset names, ``name:share`` for a training stage's: corner,
+    refiner, zoom, rescorer), validation data, epochs and the settings of its configuration
+    dataclasses."""
 
     data: tuple[str, ...] = ()
     val: tuple[str, ...] = ()
@@ -121,9 +125,10 @@ def load_build(path: str | Path) -> BuildSpec:
         for key in ("data", "val"):
             for ref in getattr(spec, key):
                 name, share = split_share(ref)
-                if share is not None and (stage, key) != ("corner", "data"):
+                if share is not None and (key != "data" or stage not in TRAINING):
                     raise ValueError(
-                        f"{src}: [{stage}].{key}: shares (name:share) are for [corner].data only"
+                        f"{src}: [{stage}].{key}: shares (name:share) are for the data of "
+                        f"{', '.join(f'[{t}]' for t in TRAINING)} only"
                     )
                 if name not in names:
                     raise ValueError(

@@ -215,10 +215,11 @@ def load_splits(
     Args:
         shares: each dataset's share of the training draws (``Split.weights``: a dataset of N
             images with share w gives each image w / N); None: every image alike.
-        same_size: require one camera size (the later stages' patches assume it); the corner
-            network letterboxes frames of any size, so its training mixes them (False). A COCO
-            folder (real images from ``import-gates``) then joins the ``train`` split whole,
-            and no other split.
+        same_size: require one camera size, image by image (the refiner's patches assume
+            it); the corner network letterboxes frames of any size, so its training mixes them
+            (False). A COCO folder (real images from ``import-gates``, :func:`load_eval_set`)
+            joins the ``train`` split whole; it has no other split (skipped without
+            ``same_size``, else an error).
 
     Raises:
         ValueError: datasets of different image sizes where ``same_size``, or as
@@ -226,17 +227,18 @@ def load_splits(
     """
     parts, used = [], []
     for i, d in enumerate(data_dirs):
-        if not same_size and not (Path(d) / "annotations" / f"{split}.json").is_file():
-            if split != "train":
-                continue  # a COCO folder has no val split
+        coco = not (Path(d) / "annotations" / f"{split}.json").is_file()
+        if coco and split == "train":
             part = load_eval_set(d, split, limit)
+        elif coco and not same_size:
+            continue  # a COCO folder has no val split
         else:
             part = load_split(d, split, None, limit)
         parts.append(part)
         used.append(i)
     if not parts:
         raise ValueError(f"none of {[str(d) for d in data_dirs]} has a {split} split")
-    sizes = {s.image_size for s in parts}
+    sizes = {s.size_of(i) for s in parts for i in range(len(s.files))}
     if same_size and len(sizes) != 1:
         raise ValueError(f"datasets of different image sizes cannot be combined: {sorted(sizes)}")
     files = [f for s in parts for f in s.files]

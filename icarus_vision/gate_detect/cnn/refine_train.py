@@ -44,6 +44,7 @@ from icarus_vision.gate_detect.cnn.refine import (
 )
 from icarus_vision.gate_detect.cnn.stage_train import (
     dataset_digest,
+    draw_order,
     load_keyed,
     run_epochs,
     save_keyed,
@@ -370,7 +371,8 @@ def train_epoch(
     batch_size: int = 256,
     on_step=None,
 ) -> dict:
-    """One pass over the candidates plus freshly jittered labelled gates; mean loss terms."""
+    """One pass over the candidates plus freshly jittered labelled gates (as many drawn in
+    proportion to their images' ``split.weights`` where it has them); mean loss terms."""
     j_idx, j_q, j_t = jittered_truth(split, rng)
     idx = np.concatenate([cands.image, j_idx])
     quads = np.concatenate([cands.quads, j_q])
@@ -383,7 +385,7 @@ def train_epoch(
     )  # fmt: skip
     scores = np.concatenate([cands.scores, j_scores])
     real = np.arange(len(idx)) < len(cands.image)
-    order = rng.permutation(len(idx))
+    order = draw_order(rng, len(idx), None if split.weights is None else split.weights[idx])
     net.train()
     sums: dict[str, float] = {}
     n = 0
@@ -449,7 +451,7 @@ class RefineResult:
 
 def train_refiner(
     detector: str | Path,
-    data_dir: str | Path | list[str | Path],
+    data_dir: str | Path | list,
     out_dir: str | Path,
     epochs: int = 12,
     seed: int = 0,
@@ -480,7 +482,10 @@ def train_refiner(
             trained on (its candidates' errors are then those of unseen images): its ``train``
             split is trained on, its ``val`` split validates and tunes. Several: the train
             splits of all are trained on, the first one's val split validates (unless
-            ``val_data``).
+            ``val_data``); each a path or (path, share): each dataset's share of the training
+            draws (examples drawn with replacement, each by its image's share / that dataset's
+            images; without shares every example once an epoch). A COCO-keypoints folder of
+            labelled real images at the camera's size (``import-gates``) joins training.
         out_dir: output folder.
         epochs: total epochs (a resumed run continues to this number).
         seed: seed of weights, shuffling and augmentation.
@@ -511,6 +516,7 @@ def train_refiner(
         load_state,
         run_folders,
         save_state,
+        sources_and_shares,
         warmup_cosine,
     )
     from icarus_vision.gate_detect.cnn.tune import score as _score
@@ -540,13 +546,11 @@ def train_refiner(
         )
     first = fuse_batchnorm(copy.deepcopy(corner_net).eval())
     size = tuple(corner_net.cfg.image_size)
-    dirs = list(data_dir) if isinstance(data_dir, list | tuple) else [data_dir]
-    if not dirs:
-        raise ValueError("no training data given")
+    dirs, shares = sources_and_shares(data_dir)
     # a finished run resumed is only tuned again: no training data needed
     finished = resume and meta.get("refine_training", {}).get("epoch", 0) >= cfg.epochs
     disk = out / TRAIN_IMAGES if cfg.images_on_disk else None
-    train = None if finished else load_splits(dirs, "train", size, cfg.limit, disk)
+    train = None if finished else load_splits(dirs, "train", size, cfg.limit, disk, shares)
     val_dirs = list(val_data) if val_data else dirs[:1]
     val = load_splits(val_dirs, "val", size, cfg.limit)
     if log is not None:
@@ -583,6 +587,8 @@ def train_refiner(
         start, history, best, _ = load_state(last_dir / STATE, opt, sched)
     info = {"detector": str(detector), "data": [str(d) for d in dirs],
             "val_data": [str(d) for d in val_dirs], "config": asdict(cfg)}  # fmt: skip
+    if shares is not None:
+        info["shares"] = shares
     if resume and "init" in meta.get("refine_training", {}):
         info["init"] = meta["refine_training"]["init"]
     elif init is not None:

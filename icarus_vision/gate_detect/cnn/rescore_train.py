@@ -5,6 +5,8 @@ detecting, and each candidate becomes a row: its features and whether its zoomed
 a labelled gate (:func:`~icarus_vision.gate_detect.cnn.rescore.labels`). Use images none of the detector's networks was trained on: on its
 own training images the refiner is surer than it will be on new ones. A tenth of the images
 (chosen by ``seed``) is held out; the weights of the epoch with the lowest held-out loss are kept.
+With shares of the data (:func:`train_rescorer`), each epoch draws its rows with replacement, each
+by its image's share / that dataset's images (the held-out loss is not weighted).
 The table is saved in OUT (``candidates.npz``) and reused by a run with the same detector and
 data; while it is read, every thousand images' rows are saved in ``OUT/candidates.parts/``, so
 the same command started again after Ctrl-C continues from the last full thousand.
@@ -21,8 +23,9 @@ import torch
 
 from icarus_vision.fileio import atomic_path
 from icarus_vision.gate_detect.cnn.checkpoint import resolve, save_rescorer, sha256
-from icarus_vision.gate_detect.cnn.data import load_split, read_rgb
+from icarus_vision.gate_detect.cnn.data import load_splits, read_rgb
 from icarus_vision.gate_detect.cnn.rescore import FEATURES, RescoreConfig, RescoreNet, labels
+from icarus_vision.gate_detect.cnn.stage_train import draw_order
 
 TABLE = "candidates.npz"
 PARTS = "candidates.parts"
@@ -48,20 +51,24 @@ class RescoreTrainConfig:
     """Only the first N images of each split (quick runs)."""
 
 
-def collect(detector, data: list[Path], splits: list[str], cfg: RescoreTrainConfig,
-            progress: bool = False, parts: Path | None = None,
+def labelled_images(data: Path, splits: list[str], limit: int | None) -> list[tuple]:
+    """(image file, labelled gates) of each image of a dataset's ``splits`` (a COCO-keypoints
+    folder: its images, as ``train``)."""
+    items = []
+    for split in splits:
+        s = load_splits([data], split, None, limit, same_size=False)
+        items += zip(s.files, s.gates, strict=True)
+    return items
+
+
+def collect(detector, items: list[tuple], progress: bool = False, parts: Path | None = None,
             key: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """(features (N, F), labels (N,) 1/0, image number (N,)) of every candidate the detector
-    reads in the splits' images. With ``parts`` (a folder), each :data:`PART` images' rows are
-    saved there as they are read, under ``key``, and parts saved under the same key are read
-    back instead: an interrupted run continues where it stopped."""
+    reads in ``items``' images (:func:`labelled_images`). With ``parts`` (a folder), each
+    :data:`PART` images' rows are saved there as they are read, under ``key``, and parts saved
+    under the same key are read back instead: an interrupted run continues where it stopped."""
     from rich.progress import track
 
-    items = []
-    for d in data:
-        for split in splits:
-            s = load_split(d, split, None, cfg.limit)
-            items += zip(s.files, s.gates, strict=True)
     if not items:
         raise ValueError("no images to read: check --data and --splits")
     if parts is not None:
@@ -96,9 +103,12 @@ def collect(detector, data: list[Path], splits: list[str], cfg: RescoreTrainConf
 
 
 def fit(x: np.ndarray, y: np.ndarray, image: np.ndarray, net_cfg: RescoreConfig,
-        cfg: RescoreTrainConfig) -> tuple[RescoreNet, list[dict]]:  # fmt: skip
-    """Train a rescorer on labelled rows (labels 1/0), holding out
-    ``cfg.holdout`` of the images; the net of the best held-out epoch and the history."""
+        cfg: RescoreTrainConfig,
+        image_weights: np.ndarray | None = None) -> tuple[RescoreNet, list[dict]]:  # fmt: skip
+    """Train a rescorer on labelled rows (labels 1/0), holding out ``cfg.holdout`` of the
+    images; the net of the best held-out epoch and the history. With ``image_weights`` (per
+    image number), each epoch draws its rows in proportion to their image's weight."""
+
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     images = np.unique(image)
@@ -112,11 +122,12 @@ def fit(x: np.ndarray, y: np.ndarray, image: np.ndarray, net_cfg: RescoreConfig,
         torch.tensor(y[~held], dtype=torch.float32),
     )
     xh, yh = torch.tensor(x[held], dtype=torch.float32), torch.tensor(y[held], dtype=torch.float32)
+    weights = None if image_weights is None else image_weights[image[~held]]
     loss_fn = torch.nn.functional.binary_cross_entropy_with_logits
     best, best_state, history = np.inf, None, []
     for epoch in range(1, cfg.epochs + 1):
         net.train()
-        order = torch.from_numpy(rng.permutation(len(xt)))
+        order = torch.from_numpy(draw_order(rng, len(xt), weights))
         total = 0.0
         for i in range(0, len(order), cfg.batch_size):
             b = order[i : i + cfg.batch_size]
@@ -141,7 +152,7 @@ def fit(x: np.ndarray, y: np.ndarray, image: np.ndarray, net_cfg: RescoreConfig,
 
 def train_rescorer(
     detector_path: str | Path,
-    data: list[Path],
+    data: list,
     out: Path,
     splits: list[str],
     net_cfg: RescoreConfig = RescoreConfig(),
@@ -151,15 +162,28 @@ def train_rescorer(
     backend: str = "auto",
 ) -> tuple[Path, list[dict]]:
     """Copy the detector at ``detector_path`` to ``out``, train a rescorer on its candidates in
-    ``data``'s ``splits`` and add it there; returns (out, history)."""
+    ``data``'s ``splits`` and add it there; returns (out, history).
+
+    ``data``: gen-dataset folders and COCO-keypoints folders (labelled real images, read as
+    ``train``), each a path or (path, share): each dataset's share of the training draws (rows
+    drawn with replacement, each by its image's share / that dataset's images; without shares
+    every row once an epoch)."""
     from icarus_vision.gate_detect.cnn import CnnDetector
+    from icarus_vision.gate_detect.cnn.train import sources_and_shares
 
     src = resolve(detector_path)
     if not data:
         raise ValueError("train-rescorer needs at least one --data folder")
+    data, shares = sources_and_shares(data)
     for d in data:
         if not Path(d).is_dir():
             raise FileNotFoundError(f"{d}: dataset folder not found")
+    per_set = [labelled_images(d, splits, cfg.limit) for d in data]
+    image_weights = None
+    if shares is not None:
+        image_weights = np.concatenate(
+            [np.full(len(s), w / len(s)) for s, w in zip(per_set, shares, strict=True)]
+        )
     out.mkdir(parents=True, exist_ok=True)
     detector = CnnDetector.load(src, backend=backend)
     key = {"detector": [sha256(src / f) for f in sorted(p.name for p in src.glob("*.safetensors"))
@@ -174,19 +198,22 @@ def train_rescorer(
                 x, y, image = z["x"], z["y"], z["image"]
                 log(f"reusing the candidates in {table}")
     if x is None:
-        x, y, image = collect(detector, data, splits, cfg, progress, out / PARTS, repr(key))
+        items = [item for s in per_set for item in s]
+        x, y, image = collect(detector, items, progress, out / PARTS, repr(key))
         with atomic_path(table) as tmp, open(tmp, "wb") as f:
             np.savez(f, x=x, y=y, image=image, key=np.array(repr(key)))
         shutil.rmtree(out / PARTS, ignore_errors=True)
     if not len(y):
         raise ValueError(f"the detector at {src} proposed no candidate to learn from in {data}")
     log(f"{len(y)} candidates ({int(y.sum())} gates) from {image.max() + 1} images")
-    net, history = fit(x, y, image, net_cfg, cfg)
+    net, history = fit(x, y, image, net_cfg, cfg, image_weights)
     for f in src.iterdir() if out.resolve() != src.resolve() else ():
         if f.is_file() and f.name not in ("rescore.safetensors", TABLE):
             shutil.copy2(f, out / f.name)
     record = {"detector": str(detector_path), "data": [str(d) for d in data], "splits": splits,
               "config": asdict(cfg), "candidates": len(y), "labels": LABELS, "backend": detector.backend,
               "best": min(history, key=lambda h: h["held_out_loss"])}  # fmt: skip
+    if shares is not None:
+        record["shares"] = shares
     save_rescorer(out, net, record)
     return out, history

@@ -1,8 +1,9 @@
-"""What the trainers of the detector's later stages (the refiner and the zoom stage) share: the
-epoch loop with its progress bar, TensorBoard logs, best and last checkpoints, history and Ctrl-C
-saving (their schedule is ``train.warmup_cosine``), and their caches of the earlier stages'
-output: arrays saved with the key they were computed from (:func:`save_keyed`), keyed by the
-networks' weights among others (:func:`weights_digest`)."""
+"""What the trainers of the detector's later stages (refiner, zoom stage, rescorer) share: the
+draws of an epoch's examples (:func:`draw_order`), the epoch loop with its progress bar,
+TensorBoard logs, best and last checkpoints, history and Ctrl-C saving (their schedule is
+``train.warmup_cosine``), and their caches of the earlier stages' output: arrays saved with the
+key they were computed from (:func:`save_keyed`), keyed by the networks' weights among others
+(:func:`weights_digest`)."""
 
 from __future__ import annotations
 
@@ -55,6 +56,16 @@ def load_keyed(path: Path, key: dict) -> dict[str, np.ndarray] | None:
             return {k: z[k] for k in z.files if k != "key"}
     except (OSError, ValueError, KeyError):
         return None
+
+
+def draw_order(rng: np.random.Generator, n: int, weights: np.ndarray | None = None) -> np.ndarray:
+    """The ``n`` examples of one epoch, in the order trained on: a permutation of all of them
+    (``weights`` None), or ``n`` drawn with replacement in proportion to ``weights`` (N,) (each
+    example its image's ``Split.weights``: every dataset its share of the draws, as the corner
+    network's sampler draws images)."""
+    if weights is None or not n:
+        return rng.permutation(n)
+    return rng.choice(n, n, p=weights / weights.sum())
 
 
 EpochFn = Callable[[int, np.random.Generator, Callable[[float], None]], tuple[dict, dict, float]]

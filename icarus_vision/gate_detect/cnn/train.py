@@ -274,6 +274,22 @@ def data_sources(data) -> list[tuple[Path, float]]:
     return out
 
 
+def sources_and_shares(data) -> tuple[list[Path], list[float] | None]:
+    """The folders of the later stages' training ``data`` (as :func:`data_sources`: a path, or a
+    list of paths and (path, share) pairs) and each one's share of the training draws: None
+    where no item gives a share (every image alike, as without shares), else 1 where not given.
+
+    Raises:
+        ValueError: no folder, or as :func:`data_sources`.
+    """
+    items = data if isinstance(data, list) else [data]
+    sources = data_sources(items)
+    if not sources:
+        raise ValueError("no training data given")
+    given = any(not isinstance(item, str | Path) for item in items)
+    return [d for d, _ in sources], [w for _, w in sources] if given else None
+
+
 def warmup_cosine(
     opt: torch.optim.Optimizer, total_steps: int, warmup: int = 100
 ) -> torch.optim.lr_scheduler.LambdaLR:

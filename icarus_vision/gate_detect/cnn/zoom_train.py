@@ -28,11 +28,12 @@ import numpy as np
 import torch
 
 from icarus_vision.fileio import atomic_write_npz
-from icarus_vision.gate_detect.cnn.data import Split, load_split, read_rgb
+from icarus_vision.gate_detect.cnn.data import Split, load_split, load_splits, read_rgb
 from icarus_vision.gate_detect.cnn.model import to_float
 from icarus_vision.gate_detect.cnn.rectify import extract, to_tensor
 from icarus_vision.gate_detect.cnn.stage_train import (
     dataset_digest,
+    draw_order,
     load_keyed,
     run_epochs,
     save_keyed,
@@ -106,10 +107,13 @@ class Examples:
         patches: (M, P, P, 3) uint8 corner patches
             (:func:`~icarus_vision.gate_detect.cnn.zoom.homographies`).
         targets: (M, 2) float32 true corner in each, half patches from its centre.
+        weights: (M,) how often training draws each, its image's share / that dataset's images
+            (None: each once an epoch).
     """
 
     patches: np.ndarray
     targets: np.ndarray
+    weights: np.ndarray | None = None
 
 
 @dataclass
@@ -309,9 +313,10 @@ def augment(x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator):
 
 
 def train_epoch(net, opt, sched, ex: Examples, rng, batch_size: int, on_step=None) -> float:
-    """One shuffled pass over the examples; the mean L1 loss (half patches)."""
+    """One shuffled pass over the examples (as many drawn by ``ex.weights`` where it has them);
+    the mean L1 loss (half patches)."""
     net.train()
-    order = rng.permutation(len(ex.targets))
+    order = draw_order(rng, len(ex.targets), ex.weights)
     total, n = 0.0, 0
     for s in range(0, len(order), batch_size):
         b = np.sort(order[s : s + batch_size])
@@ -330,7 +335,9 @@ def train_epoch(net, opt, sched, ex: Examples, rng, batch_size: int, on_step=Non
 def _load_examples(path: Path) -> Examples:
     try:
         with np.load(path, allow_pickle=False) as z:
-            return Examples(z["patches"], z["targets"])
+            return Examples(
+                z["patches"], z["targets"], z["weights"] if "weights" in z.files else None
+            )
     except (OSError, ValueError, KeyError) as e:
         raise ValueError(
             f"{path}: unreadable examples file ({e}); delete it to collect again"
@@ -349,7 +356,7 @@ class ZoomResult:
 
 def train_zoom(
     detector: str | Path,
-    data_dir: str | Path | list[str | Path],
+    data_dir: str | Path | list,
     out_dir: str | Path,
     val_dir: str | Path | None = None,
     epochs: int = 6,
@@ -374,9 +381,12 @@ def train_zoom(
     Args:
         detector: a trained detector with a refiner (checkpoint folder or file); its own zoom
             stage, if any, is ignored.
-        data_dir: gen-dataset output whose ``train`` split is trained on; several: all of them.
-            Ideally images the detector was not trained on, so that its errors are those of
-            unseen images.
+        data_dir: gen-dataset output whose ``train`` split is trained on; several: all of them,
+            each a path or (path, share): each dataset's share of the training draws (patches
+            drawn with replacement, each by its image's share / that dataset's images; without
+            shares every patch once an epoch). A COCO-keypoints folder (labelled real images,
+            ``import-gates``) joins training. Ideally images the detector was not trained on,
+            so that its errors are those of unseen images.
         out_dir: output folder.
         val_dir: the dataset whose ``val`` split validates and tunes (default: the first
             ``data_dir``).
@@ -404,6 +414,7 @@ def train_zoom(
         load_state,
         run_folders,
         save_state,
+        sources_and_shares,
         warmup_cosine,
     )
 
@@ -426,9 +437,7 @@ def train_zoom(
         cfg = replace(
             ZoomTrainConfig(**{k: v for k, v in stored.items() if k in known}), epochs=epochs
         )
-    dirs = list(data_dir) if isinstance(data_dir, list | tuple) else [data_dir]
-    if not dirs:
-        raise ValueError("no training data given")
+    dirs, shares = sources_and_shares(data_dir)
     val_dir = dirs[0] if val_dir is None else val_dir
     # the detector folds batch norm into its own copy (the checkpoints keep the networks as they
     # are); threads=None leaves PyTorch's thread count to the training
@@ -444,17 +453,21 @@ def train_zoom(
     elif not finished:
         rng = np.random.default_rng(cfg.seed)
         digest = weights_digest(corner_net, refiner)
-        parts = []
+        parts, weights = [], []
         for k, d in enumerate(dirs):
-            split = load_split(d, "train", None, cfg.limit)
+            split = load_splits([d], "train", None, cfg.limit, same_size=False)
             cuts = {f: getattr(cfg, f) for f in CUTS}
             key = {"data": str(d), "dataset": dataset_digest(d), "images": len(split.files),
                    "detector": digest, "zoom": net.cfg.to_dict(), **cuts}  # fmt: skip
             parts.append(training_examples(det, split, net.cfg, cfg, rng, progress,
                                            out / PARTS / str(k), key))  # fmt: skip
+            if shares is not None:
+                weights.append(np.full(len(parts[-1].targets), shares[k] / len(split.files)))
         train = Examples(np.concatenate([p.patches for p in parts]),
-                         np.concatenate([p.targets for p in parts]))  # fmt: skip
-        atomic_write_npz(out / EXAMPLES, patches=train.patches, targets=train.targets)
+                         np.concatenate([p.targets for p in parts]),
+                         np.concatenate(weights) if weights else None)  # fmt: skip
+        drawn = {} if train.weights is None else {"weights": train.weights}
+        atomic_write_npz(out / EXAMPLES, patches=train.patches, targets=train.targets, **drawn)
         shutil.rmtree(out / PARTS, ignore_errors=True)
         if not len(train.targets):
             raise ValueError(f"{dirs}: the detector matched no gate to train the zoom stage on")
@@ -470,6 +483,8 @@ def train_zoom(
         start, history, best, _ = load_state(last_dir / STATE, opt, sched)
     info = {"detector": str(detector), "data": [str(d) for d in dirs], "val_data": str(val_dir),
             "config": asdict(cfg)}  # fmt: skip
+    if shares is not None:
+        info["shares"] = shares
 
     def save(folder: Path, epoch: int, zoom: ZoomNet, extra: dict | None = None) -> None:
         save_checkpoint(folder, corner_net, decode_cfg, meta.get("training", {}), refiner,
