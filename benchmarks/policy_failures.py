@@ -1,7 +1,7 @@
 """Where a policy fails on race layouts: the gate it was flying to, by the gate's shape and place.
 
     .venv/bin/python benchmarks/policy_failures.py [--policy default] [--episodes 300]
-        [--seed 5000] [--gates 10] [--difficulty 1.0] [--json PATH]
+        [--seed 5000] [--gates 10] [--difficulty 1.0] [--no-randomize] [--json PATH]
 
 Flies ``--episodes`` random race layouts (ground truth, randomisation on: the finish-rate setting of
 ``policy_speed.py``) and, for every gate the policy flew to, records whether it got through. Prints
@@ -62,12 +62,16 @@ def main() -> None:
     ap.add_argument("--gates", type=int, default=10)
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--json", default=None)
+    ap.add_argument(
+        "--no-randomize", action="store_true",
+        help="nominal quadrotor, no wind, gates where the layout puts them (what randomisation costs)",
+    )  # fmt: skip
     a = ap.parse_args()
 
     policy = resolve_policy(a.policy)
     cfg = EnvConfig(
         random_tracks=True, num_gates=a.gates, layout_difficulty=a.difficulty,
-        observation=policy.observation, randomization=RandomizationConfig(enabled=True),
+        observation=policy.observation, randomization=RandomizationConfig(enabled=not a.no_randomize),
     )  # fmt: skip
     env = BatchedRacingVecEnv(a.episodes, cfg)
     env.seed(a.seed)
