@@ -2,7 +2,8 @@
 
     .venv/bin/python benchmarks/race_policy.py builtin [--seeds 20] [--detector cnn]
         [--policy default] [--backend pybullet] [--json PATH]
-    .venv/bin/python benchmarks/race_policy.py specialists [--seeds 20] [--json PATH]
+    .venv/bin/python benchmarks/race_policy.py specialists [--seeds 20] [--track NAME]
+        [--policy auto] [--json PATH]
     .venv/bin/python benchmarks/race_policy.py vision [--tracks 60] [--difficulty 1.0]
         [--policy default] [--json PATH]
 
@@ -10,8 +11,8 @@
 generalist; ``--policy auto`` flies the shipped specialists where there are some) on
 ``--backend`` (default pybullet) for seeds 100.., finish rate per track, median detection rate, and the median lap over
 the track's time-optimal plan where one is cached (`icarus-vision plan --track NAME`).
-``specialists``: `grand-prix` and `split-s` with `--policy auto` (their shipped specialists), seeds
-100.., randomised, with ground truth (`--detector oracle`) and with the CNN: finish rate and median
+``specialists``: `grand-prix` and `split-s` with `--policy auto` (their shipped specialists; a
+candidate with ``--track split-s --policy runs/x/policy``), seeds 100.., randomised, with ground truth (`--detector oracle`) and with the CNN: finish rate and median
 lap / time-optimal (plans must be cached).
 ``vision``: random race layouts (``race_track(10, 3000 + i, difficulty)``), randomised, flown by
 the generalist with the CNN and with the oracle: the finish rates side by side.
@@ -70,11 +71,16 @@ def builtin(
     return out
 
 
-def specialists(seeds: int, recipe: str | None = "gates-v1") -> dict:
+def specialists(
+    seeds: int,
+    recipe: str | None = "gates-v1",
+    policy: str = "auto",
+    tracks: tuple[str, ...] = ("grand-prix", "split-s"),
+) -> dict:
     out = {}
-    for name in ("grand-prix", "split-s"):
+    for name in tracks:
         for det in ("oracle", "cnn"):
-            reports = [run_race(name, detector=det, policy="auto", seed=s, randomize=True, recipe=recipe).report
+            reports = [run_race(name, detector=det, policy=policy, seed=s, randomize=True, recipe=recipe).report
                        for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
             out[f"{name}/{det}"] = _summary(reports)
             print(name, det, out[f"{name}/{det}"], flush=True)
@@ -112,22 +118,28 @@ def main() -> None:
     ap.add_argument("--tracks", type=int, default=60)
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--detector", default="cnn")
-    ap.add_argument("--policy", default="default",
-                    help="builtin: default or auto; vision: default or an exported policy")  # fmt: skip
+    ap.add_argument("--policy", default=None,
+                    help="builtin: default (the default) or auto; specialists: auto (the default) "
+                         "or an exported policy; vision: default (the default) or an exported policy")  # fmt: skip
+    ap.add_argument("--track", action="append", default=None,
+                    help="specialists: the track(s) to fly (default grand-prix and split-s)")  # fmt: skip
     ap.add_argument("--backend", default="pybullet", help="builtin: the physics backend")
     ap.add_argument("--recipe", default="gates-v1",
                     help="the look race --randomize draws (gates-v1, gates-v3, a path, or none)")  # fmt: skip
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
+    policy = args.policy or ("auto" if args.what == "specialists" else "default")
     recipe = None if args.recipe == "none" else args.recipe
     t0 = time.perf_counter()
     if args.what == "builtin":
-        out = builtin(args.seeds, args.detector, args.policy, args.backend, recipe)
-        out["backend"], out["policy_asked"] = args.backend, args.policy
+        out = builtin(args.seeds, args.detector, policy, args.backend, recipe)
+        out["backend"], out["policy_asked"] = args.backend, policy
     elif args.what == "specialists":
-        out = specialists(args.seeds, recipe)
+        tracks = tuple(args.track or ("grand-prix", "split-s"))
+        out = specialists(args.seeds, recipe, policy, tracks)
+        out["policy_asked"] = policy
     else:
-        out = vision(args.tracks, args.difficulty, args.policy, recipe)
+        out = vision(args.tracks, args.difficulty, policy, recipe)
     out["wall_s"], out["recipe"] = round(time.perf_counter() - t0, 1), recipe
     print(json.dumps(out, indent=1))
     if args.json:
