@@ -1,9 +1,11 @@
 """Rendering throughput of one PyBullet client (one core): labelled 320x240 frames per second.
 
-Usage: ``python benchmarks/render_fps.py [--frames N] [--seed N] [--shadows] [--renderer tiny|egl]``.
+Usage: ``python benchmarks/render_fps.py [--frames N] [--seed N] [--shadows] [--gloss K]
+[--renderer tiny|egl]``.
 A 10-gate random track with gates-v1 randomisation; poses on approach paths 1.5-10 m before a gate.
 Reports render-only (renderer + ground/sky) and full (render + labels + sensor noise) rates;
-``--shadows`` turns the light's shadows on (TinyRenderer's shadow map and the ground shadows).
+``--shadows`` turns the light's shadows on (TinyRenderer's shadow map and the ground shadows),
+``--gloss K`` a glossy floor of reflectivity K (a second, mirrored render where the floor is seen).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 
 from icarus_vision.render.labels import frame_labels
 from icarus_vision.render.randomize import apply_sensor_noise, load_recipe, sample_visuals
-from icarus_vision.render.scene import Scene
+from icarus_vision.render.scene import Gloss, Scene
 from icarus_vision.sim.dynamics import rpy_to_quat
 from icarus_vision.sim.random_track import random_track
 
@@ -31,6 +33,7 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shadows", action="store_true", help="render every frame with shadows")
+    ap.add_argument("--gloss", type=float, default=0.0, help="floor reflectivity (0: matte)")
     ap.add_argument("--renderer", choices=("tiny", "egl"), default="tiny")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
@@ -40,6 +43,7 @@ def main() -> None:
     track = random_track(10, seed=rng)
     vis = sample_visuals(recipe, rng, track)
     light = dataclasses.replace(vis.lighting, shadows=args.shadows)
+    style = dataclasses.replace(vis.style, gloss=Gloss(args.gloss) if args.gloss > 0 else None)
     poses = []
     for _ in range(args.frames):
         g = track.gates[int(rng.integers(len(track.gates)))]
@@ -49,7 +53,7 @@ def main() -> None:
         )
         poses.append((pos, rpy_to_quat(rpy[None])[0]))
     egl = args.renderer == "egl"
-    with Scene(track, vis.camera, vis.style, vis.distractors, egl=egl) as scene:
+    with Scene(track, vis.camera, style, vis.distractors, egl=egl) as scene:
         scene.render(*poses[0], light)  # warm-up
         t0 = time.perf_counter()
         for pos, quat in poses:
@@ -63,7 +67,7 @@ def main() -> None:
             apply_sensor_noise(frame.rgb, vis.sensor, rng)
         full_fps = len(poses) / (time.perf_counter() - t0)
     print(json.dumps({
-        "renderer": scene.renderer, "shadows": args.shadows,
+        "renderer": scene.renderer, "shadows": args.shadows, "gloss": args.gloss,
         "frames": len(poses), "width": scene.camera.width, "height": scene.camera.height,
         "render_fps": round(render_fps, 1), "labelled_fps": round(full_fps, 1),
         "labels_per_frame": round(n_labels / len(poses), 2),

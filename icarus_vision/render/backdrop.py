@@ -133,3 +133,36 @@ def paint_backdrop(
             cv2.copyTo(cv2.multiply(warped, gain), dark.view(np.uint8), rgb[r0:r1])
     seg[r0:r1][g] = GROUND_ID
     depth[r0:r1][g] = (np.float32(-t[2]) * inv)[g]
+
+
+def blend_reflection(
+    rgb: np.ndarray,
+    floor: np.ndarray,
+    mirror: np.ndarray,
+    hit: np.ndarray,
+    reflectivity: float,
+    blur_px: float = 0.0,
+) -> None:
+    """Blend a glossy floor's reflection into the floor pixels, in place.
+
+    A floor pixel whose reflection shows an object becomes ``(1 - k) * floor + k * reflection``,
+    k = ``reflectivity``; the blur spreads the reflection's colour and its weight alike, so the
+    pixels where the reflection shows nothing (sky, floor) neither darken nor change.
+
+    Args:
+        rgb: (H, W, 3) uint8 rendered image, modified.
+        floor: (H, W) bool, the floor's pixels.
+        mirror: (H, W, 3) uint8 render of the world mirrored through the floor, same camera.
+        hit: (H, W) bool, where ``mirror`` shows an object.
+        reflectivity: k in [0, 1].
+        blur_px: Gaussian blur sigma of the reflection, pixels (0: sharp).
+    """
+    weight = hit.astype(np.float32)
+    colour = mirror.astype(np.float32) * weight[..., None]
+    if blur_px > 0.0:
+        colour = cv2.GaussianBlur(colour, (0, 0), blur_px)
+        weight = cv2.GaussianBlur(weight, (0, 0), blur_px)
+    seen = floor & (weight > 1e-3)
+    w = weight[seen][:, None]
+    out = (1.0 - reflectivity * w) * rgb[seen] + reflectivity * colour[seen]
+    rgb[seen] = np.clip(np.rint(out), 0, 255).astype(np.uint8)

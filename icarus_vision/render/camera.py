@@ -370,7 +370,9 @@ class Camera:
         """PyBullet ``viewMatrix`` (16 floats, column-major) for one body pose."""
         return gl_view_matrix(*self.pose(pos, quat)).flatten(order="F").tolist()
 
-    def projection_matrix(self, sample_offset: tuple[float, float] = (0.0, 0.0)) -> list[float]:
+    def projection_matrix(
+        self, sample_offset: tuple[float, float] = (0.0, 0.0), rows: tuple[int, int] | None = None
+    ) -> list[float]:
         """PyBullet ``projectionMatrix`` (16 floats, column-major) matching K.
 
         Args:
@@ -378,11 +380,14 @@ class Camera:
                 pixels; compensated so that pixel (u, v) shows what K projects to (u, v).
                 TinyRenderer samples at (u - 0.5, v + 0.5): :data:`TINY_RENDERER_SAMPLE_OFFSET`;
                 OpenGL at the centre: :data:`HARDWARE_OPENGL_SAMPLE_OFFSET`.
+            rows: (r0, r1) to render only the band of image rows r0:r1 (an image r1 - r0 high);
+                None: the whole image.
         """
+        r0, r1 = rows or (0, self.height)
         k = self.K
         k[0, 2] += sample_offset[0]
-        k[1, 2] += sample_offset[1]
-        m = gl_projection_matrix(k, self.width, self.height, self.near, self.far)
+        k[1, 2] += sample_offset[1] - r0
+        m = gl_projection_matrix(k, self.width, r1 - r0, self.near, self.far)
         return m.flatten(order="F").tolist()
 
     def depth_to_z(self, buffer: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from icarus_vision.render.recipe import (
     recipe_from_dict,
 )
 from icarus_vision.render.scene import Distractor, Lighting, SceneStyle
-from icarus_vision.render.style import Hall, Trim
+from icarus_vision.render.style import Gloss, Hall, Trim
 from icarus_vision.render.textures import PRINTED_KINDS, Material
 from icarus_vision.sim.track import Track
 
@@ -35,6 +35,7 @@ __all__ = [
     "recipe_from_dict",
     "sample_camera",
     "sample_distractors",
+    "sample_gloss",
     "sample_hall",
     "sample_lighting",
     "sample_sensor",
@@ -258,6 +259,21 @@ def sample_hall(recipe: Recipe, rng: np.random.Generator, track: Track) -> Hall 
                 trusses, tuple(banners))  # fmt: skip
 
 
+def sample_gloss(recipe: Recipe, rng: np.random.Generator) -> Gloss | None:
+    """A hall's glossy floor with probability ``hall.floor_gloss_prob`` (none when it is 0).
+
+    Drawn from a stream jumped far ahead of ``rng``'s (``bit_generator.jumped()``), which leaves
+    ``rng`` where it was: switching glossy floors on changes no other draw of a dataset.
+    """
+    hr = recipe.hall
+    if hr.floor_gloss_prob <= 0.0:
+        return None
+    side = np.random.Generator(rng.bit_generator.jumped())
+    if side.random() >= hr.floor_gloss_prob:
+        return None
+    return Gloss(_u(side, hr.floor_reflectivity), _u(side, hr.floor_blur_px))
+
+
 def sample_lighting(recipe: Recipe, rng: np.random.Generator) -> Lighting:
     """Light direction, colour, strengths and the shadow switch."""
     li = recipe.light
@@ -337,7 +353,7 @@ def sample_visuals(
     sensor = sample_sensor(recipe, rng)
     hall = sample_hall(recipe, rng, track)
     if hall is not None:
-        style = replace(style, hall=hall)
+        style = replace(style, hall=hall, gloss=sample_gloss(recipe, rng))
     return Visuals(style, distractors, lighting, camera, sensor)
 
 

@@ -196,6 +196,13 @@ class HallRanges:
     """Probability of trusses: rows of bars under the ceiling."""
     banners: tuple[int, int] = (0, 6)
     """Printed banners on the walls, inclusive range."""
+    floor_gloss_prob: float = 0.0
+    """Probability that a hall's floor is glossy: it reflects the gates, walls, lights and
+    distractors above it (a second render of the scene, mirrored through the floor)."""
+    floor_reflectivity: Range = (0.15, 0.5)
+    """Share of a glossy floor's colour taken from the reflection, in [0, 1]."""
+    floor_blur_px: Range = (0.0, 1.5)
+    """Gaussian blur sigma of the reflection, pixels (a slightly rough gloss)."""
 
 
 @dataclass(frozen=True)
@@ -290,17 +297,18 @@ class Recipe:
     """Resolution, splits and sharding of a generated dataset."""
 
     def to_dict(self) -> dict:
-        """Plain nested dict (JSON-ready) of the resolved recipe. A section's keys added with the
-        gates-v3 recipe are left out while all of them keep their defaults (which switch nothing
-        on), so an older recipe keeps the identity its datasets were written with."""
+        """Plain nested dict (JSON-ready) of the resolved recipe. A section's keys added after
+        the first recipes (:data:`LATER_KEYS`) are left out while all of them keep their defaults
+        (which switch nothing on), and so is a default ``hall``, so an older recipe keeps the
+        identity its datasets were written with."""
         d = asdict(self)
-        for section, keys in LATER_KEYS.items():
-            default = asdict(type(getattr(self, section))())
-            if all(d[section][k] == default[k] for k in keys):
-                for k in keys:
-                    del d[section][k]
         if d["hall"] == asdict(HallRanges()):
             del d["hall"]
+        for section, keys in LATER_KEYS.items():
+            default = asdict(type(getattr(self, section))())
+            if section in d and all(d[section][k] == default[k] for k in keys):
+                for k in keys:
+                    del d[section][k]
         return d
 
 
@@ -312,5 +320,7 @@ LATER_KEYS = {
     "sensor": ("exposure_ev", "color_cast", "vignette_prob", "vignette", "motion_blur_prob",
                "motion_blur_px", "defocus_prob", "defocus_px", "bloom_prob", "bloom", "jpeg_prob",
                "jpeg_quality"),
+    "hall": ("floor_gloss_prob", "floor_reflectivity", "floor_blur_px"),
 }  # fmt: skip
-"""Keys added with the gates-v3 recipe (real gates and places), by section."""
+"""Keys added after the first recipes, by section: with gates-v3 (real gates and places), and the
+hall's with gates-v4 (glossy floors)."""

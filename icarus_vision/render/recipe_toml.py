@@ -62,7 +62,8 @@ def _validate(obj, prefix: str, source: str) -> None:
             if f.name in ("count", "tile", "size", "frame_width", "noise_std", "gamma", "gain",
                           "hfov_deg", "blur_sigma_px", "ambient", "diffuse", "specular", "distance",
                           "depth", "trim_width", "motion_blur_px", "defocus_px", "bloom",
-                          "vignette", "margin", "lights", "banners", "height") \
+                          "vignette", "margin", "lights", "banners", "height",
+                          "floor_blur_px") \
                     and v[0] < 0:  # fmt: skip
                 raise _fail(source, key, f"must be >= 0, got {list(v)}")
     if isinstance(obj, SurfaceRanges):
@@ -91,7 +92,7 @@ def _validate(obj, prefix: str, source: str) -> None:
 
 
 def _validate_later(obj, prefix: str, source: str) -> None:
-    """Checks of the keys added with the gates-v3 recipe."""
+    """Checks of the keys added with the gates-v3 and gates-v4 recipes."""
     if isinstance(obj, GateRanges):
         for c in obj.trim_palette:
             if len(c) != 3 or not all(0.0 <= x <= 1.0 for x in c):
@@ -115,8 +116,12 @@ def _validate_later(obj, prefix: str, source: str) -> None:
             raise _fail(source, f"{prefix}jpeg_quality", "must lie in [1, 100]")
         if obj.vignette[1] > 1.0 or obj.color_cast < 0:
             raise _fail(source, f"{prefix}vignette/color_cast", "vignette <= 1, color_cast >= 0")
-    if isinstance(obj, HallRanges) and obj.height[0] <= 2.0:
-        raise _fail(source, f"{prefix}height", "the ceiling must be higher than 2 m")
+    if isinstance(obj, HallRanges):
+        if obj.height[0] <= 2.0:
+            raise _fail(source, f"{prefix}height", "the ceiling must be higher than 2 m")
+        if not (0.0 <= obj.floor_reflectivity[0] and obj.floor_reflectivity[1] <= 1.0):
+            raise _fail(source, f"{prefix}floor_reflectivity",
+                        f"must lie in [0, 1], got {list(obj.floor_reflectivity)}")  # fmt: skip
 
 
 def _validate_geometry(obj, prefix: str, source: str) -> None:
@@ -157,7 +162,8 @@ def recipe_from_dict(data: dict, source: str = "<memory>") -> Recipe:
 
 PACKAGED = Path(__file__).resolve().parent / "recipes"
 """The recipes that ship with the package (``gates-v1``: the shipped detector's training data;
-``gates-v3``: real gates and places); ``datasets/*.toml`` in the repository point at them."""
+``gates-v3``: real gates and places; ``gates-v4``: gates-v3 with glossy hall floors);
+``datasets/*.toml`` in the repository point at them."""
 
 
 def packaged_recipes() -> list[str]:
@@ -166,7 +172,7 @@ def packaged_recipes() -> list[str]:
 
 
 def load_recipe(path: str | os.PathLike) -> Recipe:
-    """Load a recipe TOML file, or a packaged recipe by name (``gates-v1``, ``gates-v3``);
+    """Load a recipe TOML file, or a packaged recipe by name (``gates-v1``, ``gates-v3``, ...);
     ValueError names the file and the key on any problem."""
     if not Path(path).exists() and (PACKAGED / f"{path}.toml").is_file():
         path = PACKAGED / f"{path}.toml"

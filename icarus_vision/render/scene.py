@@ -5,7 +5,9 @@ scenes (one per dataset worker) can live in one process. Rendering uses TinyRend
 display) unless ``egl=True`` asks for PyBullet's EGL plugin (OpenGL; :mod:`.egl`), which builds the
 meshes from OBJ files instead of in-memory vertices; where the plugin cannot load, the scene warns
 and uses TinyRenderer. With ``Lighting.shadows`` the objects also shadow the ground
-(:mod:`.shadows`), which neither renderer does since the ground is ray-cast (:mod:`.backdrop`).
+(:mod:`.shadows`), which neither renderer does since the ground is ray-cast (:mod:`.backdrop`);
+with ``SceneStyle.gloss`` the ground reflects them (a second render of the world mirrored through
+it, only where the ground is seen).
 """
 
 from __future__ import annotations
@@ -21,24 +23,41 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from icarus_vision.render.backdrop import paint_backdrop, ray_norms, shade_factor
+from icarus_vision.render.backdrop import (
+    GROUND_ID,
+    blend_reflection,
+    paint_backdrop,
+    ray_norms,
+    shade_factor,
+)
 from icarus_vision.render.camera import (
     HARDWARE_OPENGL_SAMPLE_OFFSET,
     TINY_RENDERER_SAMPLE_OFFSET,
     Camera,
+    gl_view_matrix,
 )
 from icarus_vision.render.egl import load_egl_plugin, quiet_c_stdout, write_obj
 from icarus_vision.render.meshes import Mesh, box_corners, box_mesh, frame_mesh
 from icarus_vision.render.shadows import cylinder_points, ground_shadow_mask, place, sphere_points
-from icarus_vision.render.style import DISTRACTOR_SHAPES, Distractor, Frame, Lighting, SceneStyle
+from icarus_vision.render.style import (
+    DISTRACTOR_SHAPES,
+    Distractor,
+    Frame,
+    Gloss,
+    Lighting,
+    SceneStyle,
+)
 from icarus_vision.render.textures import Material, texture_image
 from icarus_vision.sim.bullet import p
 from icarus_vision.sim.track import Track
 
-__all__ = ["DISTRACTOR_SHAPES", "Distractor", "Frame", "Lighting", "Scene", "SceneStyle"]
+__all__ = ["DISTRACTOR_SHAPES", "Distractor", "Frame", "Gloss", "Lighting", "Scene", "SceneStyle"]
 
 RENDERERS = ("tiny", "egl")
 """Renderers of a scene (:attr:`Scene.renderer`): PyBullet's TinyRenderer, or its EGL plugin."""
+
+_MIRROR_Z = np.diag([1.0, 1.0, -1.0, 1.0])
+"""World points mirrored through the floor z = 0 (homogeneous)."""
 
 
 def _yaw_quat(yaw: float) -> list[float]:
@@ -337,34 +356,15 @@ class Scene:
         if cam.distorted:  # the pinhole view of every ray the lens sees, then through the lens
             return self._through_lens(cam, self.render(pos, quat, light, cam.pinhole_cover()[0]))
         w, h = cam.width, cam.height
-        egl = self.renderer == "egl"
-        with self._quiet():
-            _, _, rgba, depth, seg = p.getCameraImage(
-                w,
-                h,
-                viewMatrix=cam.view_matrix(pos, quat),
-                projectionMatrix=cam.projection_matrix(
-                    HARDWARE_OPENGL_SAMPLE_OFFSET if egl else TINY_RENDERER_SAMPLE_OFFSET
-                ),
-                lightDirection=list(map(float, light.direction)),
-                lightColor=list(map(float, light.color)),
-                lightDistance=100.0,
-                shadow=int(light.shadows),
-                lightAmbientCoeff=float(light.ambient),
-                lightDiffuseCoeff=float(light.diffuse),
-                lightSpecularCoeff=float(light.specular),
-                renderer=p.ER_BULLET_HARDWARE_OPENGL if egl else p.ER_TINY_RENDERER,
-                physicsClientId=self.client,
-            )
-        rgb = cv2.cvtColor(np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4), cv2.COLOR_RGBA2RGB)
-        seg = np.array(seg, dtype=np.int32).reshape(h, w)
-        z = cam.depth_to_z(np.asarray(depth, dtype=np.float32).reshape(h, w)).astype(np.float32)
+        r_wc, t_wc = cam.pose(pos, quat)
+        view = gl_view_matrix(r_wc, t_wc)
+        rgb, seg, depth = self._raster(cam, view, light)
+        z = cam.depth_to_z(depth).astype(np.float32)
         if cam not in self._rays:
             self._rays[cam] = ray_norms(cam)
         sky = self._sky
         if sky.shape[:2] != (h, w):
             sky = cv2.resize(np.ascontiguousarray(sky), (w, h), interpolation=cv2.INTER_NEAREST)
-        r_wc, t_wc = cam.pose(pos, quat)
         gain = shade_factor(light.direction, light.color, light.ambient, light.diffuse)
         shadow = shadow_gain = None
         if light.shadows:
@@ -374,9 +374,68 @@ class Scene:
             rgb, seg, z, cam, self._rays[cam], r_wc, t_wc,
             self._ground_tex, self.style.ground.tile_m, gain, sky, shadow, shadow_gain,
         )  # fmt: skip
+        if self.style.gloss is not None:
+            self._reflect(rgb, seg, cam, view, light)
         if self._emissive or self._alias:
             rgb, seg = self._lit(rgb, seg)
         return Frame(rgb, seg, z)
+
+    def _raster(
+        self,
+        cam: Camera,
+        view: np.ndarray,
+        light: Lighting,
+        shadows: bool | None = None,
+        rows: tuple[int, int] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The objects seen through a (4, 4) world -> eye view matrix, in image rows r0:r1
+        (``rows``; default all): RGB (H, W, 3) uint8, body ids (H, W) int32 (-1 where empty) and
+        the depth buffer (H, W) float32 in [0, 1]."""
+        r0, r1 = rows or (0, cam.height)
+        w, h = cam.width, r1 - r0
+        egl = self.renderer == "egl"
+        offset = HARDWARE_OPENGL_SAMPLE_OFFSET if egl else TINY_RENDERER_SAMPLE_OFFSET
+        with self._quiet():
+            _, _, rgba, depth, seg = p.getCameraImage(
+                w,
+                h,
+                viewMatrix=view.flatten(order="F").tolist(),
+                projectionMatrix=cam.projection_matrix(offset, rows),
+                lightDirection=list(map(float, light.direction)),
+                lightColor=list(map(float, light.color)),
+                lightDistance=100.0,
+                shadow=int(light.shadows if shadows is None else shadows),
+                lightAmbientCoeff=float(light.ambient),
+                lightDiffuseCoeff=float(light.diffuse),
+                lightSpecularCoeff=float(light.specular),
+                renderer=p.ER_BULLET_HARDWARE_OPENGL if egl else p.ER_TINY_RENDERER,
+                physicsClientId=self.client,
+            )
+        rgb = cv2.cvtColor(np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4), cv2.COLOR_RGBA2RGB)
+        seg = np.array(seg, dtype=np.int32).reshape(h, w)
+        return rgb, seg, np.asarray(depth, dtype=np.float32).reshape(h, w)
+
+    def _reflect(
+        self, rgb: np.ndarray, seg: np.ndarray, cam: Camera, view: np.ndarray, light: Lighting
+    ) -> None:
+        """Blend the reflection of the objects into the floor pixels of a glossy floor, in place.
+
+        The world mirrored through z = 0 is rendered from the same camera (view @ diag(1, 1, -1, 1),
+        so its pixels line up with ``rgb``; TinyRenderer draws both windings alike), without
+        shadows, in the band of rows that holds floor, and blended into the floor where it shows
+        an object (:func:`blend_reflection`).
+        """
+        rows = np.flatnonzero((seg == GROUND_ID).any(axis=1))
+        if len(rows) == 0:  # the second render only where it is seen
+            return
+        gloss = self.style.gloss
+        pad = int(np.ceil(3.0 * gloss.blur_px))
+        r0, r1 = max(0, int(rows[0]) - pad), min(cam.height, int(rows[-1]) + 1 + pad)
+        mirror, mirror_seg, _ = self._raster(cam, view @ _MIRROR_Z, light, False, (r0, r1))
+        if self._emissive or self._alias:  # ceiling lights and LED trims glow in the floor too
+            mirror, mirror_seg = self._lit(mirror, mirror_seg)
+        blend_reflection(rgb[r0:r1], seg[r0:r1] == GROUND_ID, mirror, mirror_seg >= 0,
+                         gloss.reflectivity, gloss.blur_px)  # fmt: skip
 
     def _through_lens(self, cam: Camera, pinhole: Frame) -> Frame:
         """The frame ``cam`` takes, from the render of its pinhole cover: colours interpolated,

@@ -98,6 +98,16 @@ class Hall:
 
 
 @dataclass(frozen=True)
+class Gloss:
+    """A glossy floor: the ground z = 0 reflects the objects above it like a dim mirror."""
+
+    reflectivity: float
+    """Share of a floor pixel's colour taken from the reflection where one is seen, in [0, 1]."""
+    blur_px: float = 0.0
+    """Gaussian blur sigma of the reflection, pixels (a slightly rough gloss); 0: sharp."""
+
+
+@dataclass(frozen=True)
 class SceneStyle:
     """How the world looks (everything the domain randomisation varies at build time)."""
 
@@ -119,6 +129,8 @@ class SceneStyle:
     """A lining of the gates' openings (an LED strip or padding), or none."""
     hall: Hall | None = None
     """An indoor hall around the track, or none (outdoors)."""
+    gloss: Gloss | None = None
+    """A glossy floor that reflects the objects (a second render), or none (a matte floor)."""
 
 
 @dataclass(frozen=True)

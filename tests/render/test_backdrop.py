@@ -5,6 +5,7 @@ import numpy as np
 from icarus_vision.render.backdrop import (
     GROUND_ID,
     SKY_ID,
+    blend_reflection,
     paint_backdrop,
     ray_norms,
     shade_factor,
@@ -54,3 +55,23 @@ def test_shadow_mask_is_honoured_pixel_by_pixel():
     changed = (shaded != plain).any(axis=-1)
     assert changed[:, :32].any() and not changed[:, 32:].any()
     assert not changed[seg != GROUND_ID].any()
+
+
+def test_a_reflection_blends_into_the_floor_where_it_shows_an_object():
+    rgb = np.full((20, 30, 3), 100, np.uint8)
+    floor = np.zeros((20, 30), bool)
+    floor[10:] = True  # the lower half is floor
+    mirror = np.zeros_like(rgb)
+    mirror[:, 10:20] = (250, 0, 0)
+    hit = np.zeros_like(floor)
+    hit[:, 10:20] = True  # a red object in the reflection, above and below the floor's edge
+    sharp = rgb.copy()
+    blend_reflection(sharp, floor, mirror, hit, 0.4)
+    np.testing.assert_array_equal(sharp[10:, 10:20], np.broadcast_to([160, 60, 60], (10, 10, 3)))
+    changed = (sharp != rgb).any(axis=2)
+    np.testing.assert_array_equal(changed, floor & hit)  # only floor pixels with a reflection
+    rough = rgb.copy()
+    blend_reflection(rough, floor, mirror, hit, 0.4, blur_px=1.5)
+    changed = (rough != rgb).any(axis=2)
+    assert (changed <= floor).all() and changed[10:, 8].all() and not changed[10:, :5].any()
+    assert (rough[changed][:, 0] >= 100).all()  # redder, never darkened by the empty reflection

@@ -88,6 +88,13 @@ def test_gl_matrices_agree_with_k():
     v = (1 - ndc[:, 1]) / 2 * cam.height - 0.5
     px, _ = cam.project(world, pos, quat)
     np.testing.assert_allclose(np.c_[u, v], px, atol=1e-6)
+    # A band of rows r0:r1 (a glossy floor's reflection) is the same image, cropped.
+    r0, r1 = 100, 230
+    band = np.array(cam.projection_matrix(rows=(r0, r1))).reshape(4, 4, order="F")
+    clip = (band @ view @ np.c_[world, np.ones(len(world))].T).T
+    ndc = clip[:, :3] / clip[:, 3:]
+    np.testing.assert_allclose((ndc[:, 0] + 1) / 2 * cam.width - 0.5, px[:, 0], atol=1e-6)
+    np.testing.assert_allclose((1 - ndc[:, 1]) / 2 * (r1 - r0) - 0.5, px[:, 1] - r0, atol=1e-6)
 
 
 def test_from_params():

@@ -36,9 +36,12 @@ EYE = np.array([0.0, 0.0, 2.0])
 def test_the_first_recipe_keeps_its_identity():
     d = load_recipe(V1).to_dict()
     for section, keys in LATER_KEYS.items():
-        assert not set(keys) & set(d[section])
+        assert not set(keys) & set(d.get(section, {}))
     assert "hall" not in d
-    assert set(LATER_KEYS["sensor"]) <= set(load_recipe(V3).to_dict()["sensor"])
+    v3 = load_recipe(V3).to_dict()
+    assert set(LATER_KEYS["sensor"]) <= set(v3["sensor"])
+    assert not set(LATER_KEYS["hall"]) & set(v3["hall"])  # gates-v4's glossy floors
+    assert set(LATER_KEYS["hall"]) <= set(load_recipe("gates-v4").to_dict()["hall"])
 
 
 def test_v3_draws_stay_in_their_ranges_and_repeat_with_the_seed():
@@ -171,6 +174,10 @@ def test_letterboxed_v3_frames_and_labels(tmp_path):
         ("camera", "aspects", [0.0], "ratios"),
         ("gates", "trim_prob", 1.5, "probability"),
         ("hall", "height", [1.0, 3.0], "higher than 2 m"),
+        ("hall", "floor_gloss_prob", 1.2, "probability"),
+        ("hall", "floor_reflectivity", [0.2, 1.5], "must lie in [0, 1]"),
+        ("hall", "floor_reflectivity", [0.5, 0.2], "low must be <= high"),
+        ("hall", "floor_blur_px", [-1.0, 1.0], ">= 0"),
         ("gates", "kinds", ["solid", "graffiti"], "unknown kind"),
     ],
 )
