@@ -44,7 +44,7 @@ def race_cmd(
         "gates-v1",
         help="With --randomize: the visual recipe the world's look is drawn from, once per race "
         "(gates-v1: the shipped detector's training data; gates-v3: real gates and places, halls, "
-        "LEDs, sensor effects; or a recipe TOML path). The camera stays the --quad file's.",
+        "LEDs, sensor effects; gates-v4: gates-v3 with glossy hall floors; or a recipe TOML path). The camera stays the --quad file's.",
     ),
     latency: int = typer.Option(1, min=0, help="Perception latency in camera frames."),
     video: Path = typer.Option(None, help="Video path (default: OUT/race.mp4)."),
