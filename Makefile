@@ -51,8 +51,9 @@ train-generalist: $(STAMP)
 	cp runs/policy-racing-speed/best.json icarus_vision/models/policy/racing.json
 	cp runs/policy-racing-speed/best.safetensors icarus_vision/models/policy/racing.safetensors
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-vision.toml --seed 0 --out runs/policy-racing-vision --timesteps 33411328
-	cp runs/policy-racing-vision/best.json icarus_vision/models/policy/default.json
-	cp runs/policy-racing-vision/best.safetensors icarus_vision/models/policy/default.safetensors
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-vision-more.toml --seed 0 --out runs/policy-racing-vision-more --timesteps 20000000
+	cp runs/policy-racing-vision-more/best.json icarus_vision/models/policy/default.json
+	cp runs/policy-racing-vision-more/best.safetensors icarus_vision/models/policy/default.safetensors
 
 # The shipped specialists (models/policy/<track>-specialist.*, from each run's policy.*), side by side.
 train-specialists: $(STAMP)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -207,3 +208,13 @@ def test_crash_cost_and_center_reward_replace_the_presets_weights():
     for key in ("crash_cost", "center_reward"):
         with pytest.raises(ValueError, match=key):
             config_from_dict({key: -1.0})
+
+
+@pytest.mark.parametrize(
+    "path", sorted(Path(__file__).parents[2].joinpath("configs").glob("policy-*.toml")), ids=str
+)
+def test_every_shipped_training_config_loads(path):
+    """The configs the README and `make train-generalist` name are valid train-policy configs."""
+    from icarus_vision.policy.config import load_train_config
+
+    load_train_config(path)  # raises on an unknown key or a value out of range
