@@ -88,24 +88,23 @@ def test_shipped_policies_load_without_pickles():
         assert pol.act(np.zeros(pol.obs_dim, np.float32)).shape == (4,)
 
 
-def test_init_copies_the_exported_actor_and_refuses_mismatches():
-    cfg = replace(SPECIALIST, ppo=replace(SPECIALIST.ppo, num_envs=4, batch_size=64))
-    env = make_train_env(cfg, 4, 3, seed=0)
-    model = PPO(
-        "MlpPolicy",
-        env,
-        policy_kwargs={"net_arch": [64, 64]},
-        device="cpu",
-        n_steps=8,
-        batch_size=32,
+def _tiny_ppo(observation: str = "extended", net_arch=(64, 64)):
+    """An untrained PPO on a 4-drone specialist training env with ``observation``."""
+    cfg = replace(
+        SPECIALIST, observation=observation, ppo=replace(SPECIALIST.ppo, num_envs=4, batch_size=64)
     )
+    env = make_train_env(cfg, 4, 3, seed=0)
+    kwargs = {"net_arch": list(net_arch)}
+    return PPO("MlpPolicy", env, policy_kwargs=kwargs, device="cpu", n_steps=8, batch_size=32)
+
+
+def test_init_copies_the_exported_actor_and_refuses_mismatches():
+    model = _tiny_ppo()
     policy = load_init_actor(model, "default", "extended")
     obs = np.random.default_rng(0).normal(size=(16, 21)).astype(np.float32)
     mean, _ = model.predict(obs_to_features(obs), deterministic=True)
     assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs), abs=1e-5)
-    small = PPO(
-        "MlpPolicy", env, policy_kwargs={"net_arch": [32]}, device="cpu", n_steps=8, batch_size=32
-    )
+    small = _tiny_ppo(net_arch=(32,))
     with pytest.raises(ValueError, match="do not match"):
         load_init_actor(small, "default", "extended")
     with pytest.raises(ValueError, match="larger than this run's basic"):
@@ -115,19 +114,8 @@ def test_init_copies_the_exported_actor_and_refuses_mismatches():
 def test_init_widens_a_smaller_observation_with_zero_weights():
     """The shipped (extended) generalist fine-tuned on the racing observation flies as before,
     whatever the new entries say, until training gives them weight."""
-    cfg = replace(
-        SPECIALIST, observation="racing", ppo=replace(SPECIALIST.ppo, num_envs=4, batch_size=64)
-    )
-    env = make_train_env(cfg, 4, 3, seed=0)
-    assert env.observation_space.shape == (24,)
-    model = PPO(
-        "MlpPolicy",
-        env,
-        policy_kwargs={"net_arch": [64, 64]},
-        device="cpu",
-        n_steps=8,
-        batch_size=32,
-    )
+    model = _tiny_ppo("racing")
+    assert model.observation_space.shape == (24,)
     policy = load_init_actor(model, "default", "racing")
     assert policy.observation == "extended"
     obs = np.random.default_rng(1).normal(size=(16, 25)).astype(np.float32)
