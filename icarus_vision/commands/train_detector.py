@@ -20,7 +20,8 @@ def train_detector_cmd(
         ...,
         help="gen-dataset output folder (train and val splits), or a COCO-keypoints folder of "
         "labelled real images (import-gates; training only); repeat to mix several, each as "
-        "DIR:SHARE for its share of the training draws (e.g. --data renders:7 --data real:1).",
+        "DIR:SHARE for its share of the training draws (e.g. --data renders:7 --data real:1); "
+        "several folders without shares each get an equal share of the draws.",
     ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, model.onnx, tb/."),
     epochs: int = typer.Option(12, min=1, help="Total epochs (a resumed run continues to this)."),

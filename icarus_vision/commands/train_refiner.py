@@ -19,7 +19,7 @@ def train_refiner_cmd(
         "first stage was not trained on, or a COCO-keypoints folder of labelled real images at "
         "the camera's size (import-gates; training only); repeat to train on several (the first "
         "one's val split validates, unless --val), each as DIR:SHARE for its share of the "
-        "training draws (e.g. --data renders:7 --data real:1).",
+        "training draws (e.g. --data renders:7 --data real:1); with no share given, every image counts alike, whichever folder it is in.",
     ),
     val: list[Path] = typer.Option(
         None,

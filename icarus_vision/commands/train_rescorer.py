@@ -17,7 +17,7 @@ def train_rescorer_cmd(
         help="gen-dataset output whose images the detector reads, or a COCO-keypoints folder of "
         "labelled real images (import-gates; read as train), ideally images none of its "
         "networks was trained on; repeat to use several, each as DIR:SHARE for its share of the "
-        "training draws (rows drawn by image; e.g. --data renders:7 --data real:1).",
+        "training draws (rows drawn by image; e.g. --data renders:7 --data real:1); with no share given, every image counts alike, whichever folder it is in.",
     ),
     out: Path = typer.Option(
         ..., help="Output folder: the detector with the rescorer added, and candidates.npz."

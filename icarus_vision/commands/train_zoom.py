@@ -18,7 +18,7 @@ def train_zoom_cmd(
         help="gen-dataset output whose train split is trained on, or a COCO-keypoints folder of "
         "labelled real images (import-gates), ideally images the detector was not trained on; "
         "repeat to train on several, each as DIR:SHARE for its share of the training draws "
-        "(e.g. --data renders:7 --data real:1).",
+        "(e.g. --data renders:7 --data real:1); with no share given, every image counts alike, whichever folder it is in.",
     ),
     out: Path = typer.Option(..., help="Output folder: best/, last/, zoom.onnx, tb/."),
     val: Path = typer.Option(
