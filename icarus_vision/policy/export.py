@@ -172,7 +172,10 @@ def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
     A policy of a smaller observation than the run's (``basic`` into ``extended`` or ``racing``,
     ``extended`` into ``racing``) starts with zero first-layer weights for the features it did not
     read, so it flies as before until training finds a use for them (the features of a smaller
-    observation are the first ones of a larger: ``features.py``).
+    observation are the first ones of a larger: ``features.py``). Likewise a run with wider hidden
+    layers (same depth) keeps the new units' fresh input weights and gives their outputs zero
+    weight, so the wider actor computes exactly the exported one's actions and training grows the
+    new units from there.
 
     Args:
         model: PPO with an MlpPolicy whose actor has the exported policy's hidden layers.
@@ -197,20 +200,25 @@ def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
             f"{policy.observation!r} in the config"
         )
     weights = list(policy.weights)
-    w0, b0 = weights[0]
-    missing = feature_dim(OBS_DIMS[observation]) - w0.shape[1]
-    weights[0] = (np.pad(w0, ((0, 0), (0, missing))), b0)
     pol = model.policy
     layers = [m for m in pol.mlp_extractor.policy_net if hasattr(m, "weight")]
     layers.append(pol.action_net)
     if len(layers) != len(weights) or any(
-        tuple(layer.weight.shape) != w.shape for layer, (w, _) in zip(layers, weights, strict=True)
+        layer.weight.shape[0] < w.shape[0] for layer, (w, _) in zip(layers, weights, strict=True)
     ):
         raise ValueError(
-            f"{policy.path}: its layers {policy.desc['hidden']} do not match this run's ppo.net_arch"
+            f"{policy.path}: its layers {policy.desc['hidden']} do not match this run's ppo.net_arch "
+            "(the run's layers must be as many and at least as wide)"
         )
     with torch.no_grad():
         for layer, (w, b) in zip(layers, weights, strict=True):
-            layer.weight.copy_(torch.from_numpy(w))
-            layer.bias.copy_(torch.from_numpy(b))
+            out_old, in_old = w.shape
+            new_w = layer.weight.detach().numpy().copy()
+            # The exported units ignore the features and the new units it did not have.
+            new_w[:out_old, :in_old] = w
+            new_w[:out_old, in_old:] = 0.0
+            new_b = layer.bias.detach().numpy().copy()
+            new_b[:out_old] = b
+            layer.weight.copy_(torch.from_numpy(new_w))
+            layer.bias.copy_(torch.from_numpy(new_b))
     return policy

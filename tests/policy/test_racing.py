@@ -126,6 +126,21 @@ def test_init_widens_a_smaller_observation_with_zero_weights():
     assert w.shape == (64, 24) and not w[:, 21:].any()
 
 
+def test_init_widens_the_hidden_layers_without_changing_the_actions():
+    """A wider network (same depth) starts from the exported actor: the new units have zero
+    outgoing weight, so the actions are the exported policy's; a narrower one is refused."""
+    model = _tiny_ppo("racing", net_arch=(96, 80))
+    policy = load_init_actor(model, "default", "racing")
+    obs = np.random.default_rng(3).normal(size=(16, 25)).astype(np.float32)
+    mean, _ = model.predict(obs_to_features(obs), deterministic=True)
+    assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs[:, :21]), abs=1e-5)
+    hidden = model.policy.mlp_extractor.policy_net[2].weight.detach().numpy()
+    assert hidden.shape == (80, 96) and not hidden[:64, 64:].any() and hidden[64:].any()
+    assert not model.policy.action_net.weight.detach().numpy()[:, 64:].any()
+    with pytest.raises(ValueError, match="at least as wide"):
+        load_init_actor(_tiny_ppo(net_arch=(64, 32)), "default", "extended")
+
+
 def test_difficulty_curriculum_config_is_validated():
     cfg = config_from_dict({"curriculum": {"stages": [3, 10], "difficulty": [0.2, 1.0]}})
     assert cfg.curriculum.difficulty_at(1) == 1.0
