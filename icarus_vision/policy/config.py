@@ -97,6 +97,11 @@ class PerceptionNoiseConfig:
     """Growth of the miss probability per metre."""
     out_of_view: bool = False
     """A gate outside the camera's field of view is never seen (its last estimate is held)."""
+    map_error_m: float = 0.0
+    """Error of the map a new target gate starts from: its first estimate is the truth moved
+    uniformly within ± this per axis, as a race's estimator starts from the nominal layout while
+    randomisation moves each gate within ± ``gate_pos_jitter_m`` (0.3); until the gate is seen
+    the policy flies on that. 0: the first estimate is an ordinary detection (σ at its distance)."""
 
 
 @dataclass(frozen=True)
@@ -231,6 +236,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("perception.sigma_per_m", c.perception.sigma_per_m >= 0),
         ("perception.miss_base", 0 <= c.perception.miss_base <= 1),
         ("perception.miss_per_m", c.perception.miss_per_m >= 0),
+        ("perception.map_error_m", c.perception.map_error_m >= 0),
         ("max_episode_s", c.max_episode_s is None or c.max_episode_s > 0),
     ]
     for name, ok in checks:

@@ -5,7 +5,9 @@ vector: each step the detector "sees" the next gate with probability 1 − miss(
 estimated world position is redrawn around the truth with standard deviation σ(d) per axis (d = the
 distance to the gate); on a miss the last estimate is held (as the estimator carries it through
 odometry) and the relative vector is recomputed from the drone's current position. A new target
-gate always starts with a fresh draw (the map prior). With ``out_of_view`` set, a gate outside the
+gate always starts with a fresh draw (the map prior): an ordinary detection's, or with a map error
+set, the truth moved uniformly within ± that per axis (a race's map is the nominal layout, and
+randomisation moves the real gates off it). With ``out_of_view`` set, a gate outside the
 camera's field of view is never seen (the detector cannot find what the camera does not show), so
 a policy that turns the camera away from the next gate flies on a stale estimate.
 
@@ -115,10 +117,14 @@ class PerceptionNoise:
         n: int,
         seed: int | None = None,
         camera: CameraParams | None = None,
+        map_error_m: float = 0.0,
     ) -> None:
-        """``camera``: when given, gates outside its field of view are never seen."""
+        """``camera``: when given, gates outside its field of view are never seen;
+        ``map_error_m``: a new target gate's first estimate is the truth moved uniformly within
+        ± this per axis (0: an ordinary detection's draw)."""
         self.model = model
         self.camera = camera
+        self.map_error_m = map_error_m
         self.rng = np.random.default_rng(seed)
         self.est = np.zeros((n, 3))
         self.true_prev = np.full((n, 3), np.nan)
@@ -144,6 +150,9 @@ class PerceptionNoise:
             detected &= gate_in_view(obs, self.camera)
         seen = switched | detected
         noise = self.rng.normal(size=(len(obs), 3)) * self.model.sigma(dist)[:, None]
+        if self.map_error_m > 0:
+            prior = self.rng.uniform(-self.map_error_m, self.map_error_m, size=(len(obs), 3))
+            noise = np.where(switched[:, None], prior, noise)
         self.est = np.where(seen[:, None], true_gate + noise, self.est)
         self.true_prev = true_gate
         out = obs.astype(np.float32, copy=True)
@@ -160,9 +169,10 @@ class PerceptionNoiseVecEnv(VecEnvWrapper):
         model: ErrorModel,
         seed: int | None = None,
         camera: CameraParams | None = None,
+        map_error_m: float = 0.0,
     ) -> None:
         super().__init__(venv)
-        self.noise = PerceptionNoise(model, venv.num_envs, seed, camera)
+        self.noise = PerceptionNoise(model, venv.num_envs, seed, camera, map_error_m)
 
     def reset(self) -> np.ndarray:
         return self.noise.apply(self.venv.reset(), np.ones(self.num_envs, bool))

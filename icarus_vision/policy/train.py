@@ -89,7 +89,9 @@ def make_train_env(
     if cfg.perception.enabled:
         camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
         model = ErrorModel.from_config(cfg.perception)
-        venv = PerceptionNoiseVecEnv(venv, model, seed=seed + 7919, camera=camera)
+        venv = PerceptionNoiseVecEnv(
+            venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m
+        )
     return FeatureVecEnv(venv)
 
 

@@ -60,6 +60,25 @@ def test_out_of_view_gates_are_never_seen():
     assert held[1] == pytest.approx(first[1, 12:15], abs=1e-5)  # behind the drone: held
 
 
+def test_a_new_gate_starts_from_the_maps_error_and_keeps_it_until_seen():
+    """With a map error, a new target gate's first estimate is off by a uniform draw within ±
+    the error per axis (not the detector's σ), and a gate outside the view keeps that error."""
+    model = ErrorModel((0.0, 30.0), (0.0, 0.0), (0.0, 0.0))  # detections are exact
+    n = 4000
+    gates = np.tile([[-5.0, 0.0, 0.0]], (n, 1))  # behind the drones: never seen
+    noise = PerceptionNoise(model, n, seed=0, camera=CameraParams(), map_error_m=0.3)
+    first = noise.apply(_obs(0.0, gates), np.ones(n, bool))
+    err = first[:, 12:15] - gates
+    assert np.abs(err).max() <= 0.3 + 1e-6 and np.abs(err).max() > 0.29
+    assert err.std(axis=0) == pytest.approx(np.full(3, 0.3 / np.sqrt(3)), rel=0.05)
+    later = noise.apply(_obs(0.0, gates), np.zeros(n, bool))
+    assert later[:, 12:15] == pytest.approx(first[:, 12:15], abs=1e-6)  # held: still unseen
+    exact = PerceptionNoise(model, n, seed=0, camera=CameraParams())
+    assert exact.apply(_obs(0.0, gates), np.ones(n, bool))[:, 12:15] == pytest.approx(gates)
+    with pytest.raises(ValueError, match="perception.map_error_m"):
+        config_from_dict({"perception": {"map_error_m": -0.1}})
+
+
 def test_auto_picks_a_shipped_specialist_only_for_its_own_layout():
     assert "default" in shipped_policies()
     for name in ("single-gate", "ten-gates"):
