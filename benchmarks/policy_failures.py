@@ -7,7 +7,9 @@ Flies ``--episodes`` random race layouts (ground truth, randomisation on: the fi
 ``policy_speed.py``) and, for every gate the policy flew to, records whether it got through. Prints
 the failure rate per gate (failures at a gate / gates attempted) by the gate's opening size, its
 angle off the approach (the direction from the previous passage), the height change and the turn
-it asks for, and how each failed episode ended (gate collision, ground, out of bounds, time).
+it asks for, and how each failed episode ended (gate collision, ground, out of bounds, time); for
+gate collisions, which gate was hit: the one being flown to, the one just passed (its frame clipped
+on the way through), or another gate in the way (the gate nearest the drone's last position).
 """
 
 from __future__ import annotations
@@ -54,6 +56,20 @@ def gate_properties(track) -> list[dict]:
     return out
 
 
+def gate_hit(track, passed: int, pos: np.ndarray) -> str:
+    """Which gate a collision was with: the physical gate nearest ``pos`` (the drone's position
+    at the start of the step it hit in), named by its role for the gate being flown to."""
+    centres = np.array([g.pos for g in track.passages], float)
+    nearest = centres[int(np.argmin(np.linalg.norm(centres - pos, axis=1)))]
+
+    def same(k: int) -> bool:
+        return 0 <= k < len(centres) and np.linalg.norm(centres[k] - nearest) < 0.05
+
+    if same(passed):
+        return "next"
+    return "just passed" if same(passed - 1) else "other"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--policy", default="default")
@@ -79,6 +95,7 @@ def main() -> None:
     tracks = list(env.core.tracks)
     results: list[dict | None] = [None] * a.episodes
     while any(r is None for r in results):
+        last_pos = env.state.pos.copy()
         obs, _, done, infos = env.step(policy.act(obs))
         for i in np.flatnonzero(done):
             if results[i] is None:
@@ -87,6 +104,7 @@ def main() -> None:
                     "track": tracks[i], "passed": info["gates_passed"],
                     "total": info["gates_total"], "reason": info["crash_reason"] or "time",
                     "success": info["all_gates_passed"] and not info["crashed"],
+                    "last_pos": last_pos[i],
                 }  # fmt: skip
         tracks = list(env.core.tracks)
 
@@ -106,10 +124,18 @@ def main() -> None:
                 failed[name][label] += fail
         if not r["success"]:
             reasons[r["reason"]] += 1
+    hit = defaultdict(int)
+    for r in results:
+        if r["reason"] == "gate_collision":
+            hit[gate_hit(r["track"], r["passed"], r["last_pos"])] += 1
     n_ok = sum(r["success"] for r in results)
     print(f"policy {a.policy}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)")
     print("failed episodes by ending:", dict(reasons))
-    report = {"finished": n_ok, "episodes": a.episodes, "endings": dict(reasons), "per_gate": {}}
+    print("gate collisions by the gate hit:", dict(hit))
+    report = {
+        "finished": n_ok, "episodes": a.episodes, "endings": dict(reasons),
+        "gate_hit": dict(hit), "per_gate": {},
+    }  # fmt: skip
     for name in BUCKETS:
         print(f"\n{name}: failure per gate attempted")
         rows = {}
