@@ -102,6 +102,11 @@ class PerceptionNoiseConfig:
     uniformly within ± this per axis, as a race's estimator starts from the nominal layout while
     randomisation moves each gate within ± ``gate_pos_jitter_m`` (0.3); until the gate is seen
     the policy flies on that. 0: the first estimate is an ordinary detection (σ at its distance)."""
+    map_yaw_error_deg: float = 0.0
+    """With the extended observation: a new target gate's passage direction is turned uniformly
+    within ± this until the gate is seen (the map's heading; randomisation turns gates up to
+    ±10°), and the gate after it is off by ± ``map_error_m`` per axis, as a race reads both from
+    the map. 0: both true."""
 
 
 @dataclass(frozen=True)
@@ -237,6 +242,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("perception.miss_base", 0 <= c.perception.miss_base <= 1),
         ("perception.miss_per_m", c.perception.miss_per_m >= 0),
         ("perception.map_error_m", c.perception.map_error_m >= 0),
+        ("perception.map_yaw_error_deg", 0 <= c.perception.map_yaw_error_deg <= 180),
         ("max_episode_s", c.max_episode_s is None or c.max_episode_s > 0),
     ]
     for name, ok in checks:

@@ -29,6 +29,8 @@ from icarus_vision.sim.dynamics import quat_to_rot, rpy_to_quat
 from icarus_vision.sim.quad import CameraParams
 
 GATE = slice(12, 15)
+HEADING = slice(15, 18)  # extended: the next gate's passage direction (world, horizontal unit)
+AFTER = slice(18, 21)  # extended: the gate after, relative to the drone (world)
 
 
 @dataclass(frozen=True)
@@ -118,16 +120,24 @@ class PerceptionNoise:
         seed: int | None = None,
         camera: CameraParams | None = None,
         map_error_m: float = 0.0,
+        map_yaw_error_deg: float = 0.0,
     ) -> None:
         """``camera``: when given, gates outside its field of view are never seen;
         ``map_error_m``: a new target gate's first estimate is the truth moved uniformly within
-        ± this per axis (0: an ordinary detection's draw)."""
+        ± this per axis (0: an ordinary detection's draw); ``map_yaw_error_deg``: with the
+        extended observation, a new target gate's passage direction is turned uniformly within ±
+        this until the gate is seen, and the gate after it is off by ± ``map_error_m`` per axis
+        (both from the map, as in a race; drawn from a stream of their own)."""
         self.model = model
         self.camera = camera
         self.map_error_m = map_error_m
+        self.map_yaw_error = np.radians(map_yaw_error_deg)
         self.rng = np.random.default_rng(seed)
+        self.map_rng = np.random.default_rng([0 if seed is None else seed, 1])
         self.est = np.zeros((n, 3))
         self.true_prev = np.full((n, 3), np.nan)
+        self.yaw_err = np.zeros(n)
+        self.after_err = np.zeros((n, 3))
 
     def apply(self, obs: np.ndarray, new_episode: np.ndarray | None = None) -> np.ndarray:
         """Perceived observations.
@@ -157,6 +167,17 @@ class PerceptionNoise:
         self.true_prev = true_gate
         out = obs.astype(np.float32, copy=True)
         out[:, GATE] = self.est - pos
+        if self.map_yaw_error > 0 and obs.shape[1] >= AFTER.stop:
+            n = len(obs)
+            yaw = self.map_rng.uniform(-self.map_yaw_error, self.map_yaw_error, n)
+            after = self.map_rng.uniform(-self.map_error_m, self.map_error_m, (n, 3))
+            self.yaw_err = np.where(switched, yaw, np.where(detected, 0.0, self.yaw_err))
+            self.after_err = np.where(switched[:, None], after, self.after_err)
+            c, s = np.cos(self.yaw_err), np.sin(self.yaw_err)
+            hx, hy = obs[:, HEADING.start], obs[:, HEADING.start + 1]
+            out[:, HEADING.start] = c * hx - s * hy
+            out[:, HEADING.start + 1] = s * hx + c * hy
+            out[:, AFTER] += self.after_err
         return out
 
 
@@ -170,9 +191,12 @@ class PerceptionNoiseVecEnv(VecEnvWrapper):
         seed: int | None = None,
         camera: CameraParams | None = None,
         map_error_m: float = 0.0,
+        map_yaw_error_deg: float = 0.0,
     ) -> None:
         super().__init__(venv)
-        self.noise = PerceptionNoise(model, venv.num_envs, seed, camera, map_error_m)
+        self.noise = PerceptionNoise(
+            model, venv.num_envs, seed, camera, map_error_m, map_yaw_error_deg
+        )
 
     def reset(self) -> np.ndarray:
         return self.noise.apply(self.venv.reset(), np.ones(self.num_envs, bool))

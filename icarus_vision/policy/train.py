@@ -90,8 +90,9 @@ def make_train_env(
         camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
         model = ErrorModel.from_config(cfg.perception)
         venv = PerceptionNoiseVecEnv(
-            venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m
-        )
+            venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m,
+            map_yaw_error_deg=cfg.perception.map_yaw_error_deg,
+        )  # fmt: skip
     return FeatureVecEnv(venv)
 
 

@@ -79,6 +79,34 @@ def test_a_new_gate_starts_from_the_maps_error_and_keeps_it_until_seen():
         config_from_dict({"perception": {"map_error_m": -0.1}})
 
 
+def test_the_maps_heading_and_gate_after_are_off_until_the_gate_is_seen():
+    """With a map heading error, a new target gate's passage direction is turned within ± the
+    error while unseen and true once seen; the gate after is off by ± the map error throughout;
+    the position draws are those of a run without it (a stream of their own)."""
+    model = ErrorModel((0.0, 30.0), (0.0, 0.0), (0.0, 0.0))  # detections are exact
+    n = 2000
+    obs = _obs(0.0, np.tile([[-5.0, 0.0, 0.0]], (n, 1)))  # behind: unseen
+    obs[:, 15:18] = [1.0, 0.0, 0.0]
+    obs[:, 18:21] = [-9.0, 2.0, 0.0]
+    noise = PerceptionNoise(model, n, 0, CameraParams(), map_error_m=0.3, map_yaw_error_deg=10.0)
+    first = noise.apply(obs, np.ones(n, bool))
+    yaw = np.degrees(np.arctan2(first[:, 16], first[:, 15]))
+    assert np.abs(yaw).max() <= 10.0 + 1e-4 and np.abs(yaw).max() > 9.5
+    assert np.linalg.norm(first[:, 15:18], axis=1) == pytest.approx(np.ones(n), abs=1e-6)
+    after = first[:, 18:21] - obs[:, 18:21]
+    assert np.abs(after).max() <= 0.3 + 1e-6 and np.abs(after).max() > 0.29
+    plain = PerceptionNoise(model, n, 0, CameraParams(), map_error_m=0.3)
+    assert plain.apply(obs, np.ones(n, bool))[:, 12:15] == pytest.approx(first[:, 12:15])
+    ahead = obs.copy()
+    ahead[:, 12:15] = [5.0, 0.0, 0.0]  # the same gate, now in view (the drones turned round)
+    ahead[:, 0:3] = [-10.0, 0.0, 0.0]
+    seen = noise.apply(ahead, np.zeros(n, bool))
+    assert seen[:, 15:18] == pytest.approx(ahead[:, 15:18], abs=1e-6)  # seen: the true heading
+    assert seen[:, 18:21] - ahead[:, 18:21] == pytest.approx(after, abs=1e-5)  # the map's still
+    with pytest.raises(ValueError, match="perception.map_yaw_error_deg"):
+        config_from_dict({"perception": {"map_yaw_error_deg": -1.0}})
+
+
 def test_auto_picks_a_shipped_specialist_only_for_its_own_layout():
     assert "default" in shipped_policies()
     for name in ("single-gate", "ten-gates"):
