@@ -133,7 +133,7 @@ class PerceptionNoise:
         self.map_error_m = map_error_m
         self.map_yaw_error = np.radians(map_yaw_error_deg)
         self.rng = np.random.default_rng(seed)
-        self.map_rng = np.random.default_rng([0 if seed is None else seed, 1])
+        self.map_rng = np.random.default_rng(None if seed is None else [seed, 1])
         self.est = np.zeros((n, 3))
         self.true_prev = np.full((n, 3), np.nan)
         self.yaw_err = np.zeros(n)
