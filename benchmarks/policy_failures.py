@@ -9,7 +9,9 @@ the failure rate per gate (failures at a gate / gates attempted) by the gate's o
 angle off the approach (the direction from the previous passage), the height change and the turn
 it asks for, and how each failed episode ended (gate collision, ground, out of bounds, time); for
 gate collisions, which gate was hit: the one being flown to, the one just passed (its frame clipped
-on the way through), or another gate in the way (the gate nearest the drone's last position).
+on the way through), or another gate in the way (the gate nearest the drone's last position);
+and by the crossing angle — between the drone's velocity and the gate's passage direction on the
+step it passed the gate or hit the gate it was flying to — the failure rate at that gate.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 from icarus_vision.fileio import atomic_write_json
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
+from icarus_vision.sim.rules import crossing_alignment
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
 BUCKETS = {
@@ -31,6 +34,7 @@ BUCKETS = {
     "turn_deg": (0, 30, 60, 90, 180.1),
     "approach_m": (0, 3, 6, 10, 30),
 }
+CROSSING_DEG = (0, 15, 30, 45, 60, 75, 90.1)
 
 
 def gate_properties(track) -> list[dict]:
@@ -94,17 +98,28 @@ def main() -> None:
     obs = env.reset()
     tracks = list(env.core.tracks)
     results: list[dict | None] = [None] * a.episodes
+    crossings: list[list[float]] = [[] for _ in range(a.episodes)]  # angle at each gate passed
+    core, rows = env.core, np.arange(a.episodes)
     while any(r is None for r in results):
-        last_pos = env.state.pos.copy()
+        last_pos, target = env.state.pos.copy(), core.target.copy()
+        vel = env.state.vel.copy()
+        angle = np.degrees(np.arccos(np.clip(
+            crossing_alignment(np.zeros_like(vel), vel, core.g_yaw[rows, target]), -1.0, 1.0
+        )))  # fmt: skip
         obs, _, done, infos = env.step(policy.act(obs))
+        for i in np.flatnonzero((core.target != target) & ~done):
+            if results[i] is None:
+                crossings[i].append(angle[i])
         for i in np.flatnonzero(done):
             if results[i] is None:
                 info = infos[i]
+                if info["all_gates_passed"]:
+                    crossings[i].append(angle[i])
                 results[i] = {
                     "track": tracks[i], "passed": info["gates_passed"],
                     "total": info["gates_total"], "reason": info["crash_reason"] or "time",
                     "success": info["all_gates_passed"] and not info["crashed"],
-                    "last_pos": last_pos[i],
+                    "last_pos": last_pos[i], "crossings": crossings[i], "last_angle": angle[i],
                 }  # fmt: skip
         tracks = list(env.core.tracks)
 
@@ -125,9 +140,14 @@ def main() -> None:
         if not r["success"]:
             reasons[r["reason"]] += 1
     hit = defaultdict(int)
+    cross_ok, cross_hit = [], []
     for r in results:
+        cross_ok += r["crossings"]
         if r["reason"] == "gate_collision":
-            hit[gate_hit(r["track"], r["passed"], r["last_pos"])] += 1
+            which = gate_hit(r["track"], r["passed"], r["last_pos"])
+            hit[which] += 1
+            if which == "next":
+                cross_hit.append(r["last_angle"])
     n_ok = sum(r["success"] for r in results)
     print(f"policy {a.policy}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)")
     print("failed episodes by ending:", dict(reasons))
@@ -144,6 +164,15 @@ def main() -> None:
             rows[label] = {"attempted": n, "failed": f, "rate": f / n}
             print(f"  {label:>12}: {f:4d} / {n:5d} = {100 * f / n:5.1f} %")
         report["per_gate"][name] = rows
+    print("\ncrossing angle (velocity to passage direction): next-gate collisions / attempts")
+    n_ok, _ = np.histogram(cross_ok, CROSSING_DEG)
+    n_hit, _ = np.histogram(cross_hit, CROSSING_DEG)
+    report["crossing_deg"] = {}
+    for lo, hi, ok, f in zip(CROSSING_DEG[:-1], CROSSING_DEG[1:], n_ok, n_hit, strict=True):
+        n = int(ok + f)
+        label = f"{lo:g}..{hi:g}"
+        report["crossing_deg"][label] = {"attempted": n, "failed": int(f), "rate": f / max(n, 1)}
+        print(f"  {label:>12}: {f:4d} / {n:5d} = {100 * f / max(n, 1):5.1f} %")
     if a.json:
         atomic_write_json(a.json, report)
 

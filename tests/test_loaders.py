@@ -44,7 +44,7 @@ QUAD_KEYS = ["name", "mass", "inertia", "arm_length", "thrust_to_weight", "max_r
              "drag", "radius", "camera"]  # fmt: skip
 CONFIG_KEYS = ["preset", "total_timesteps", "ppo", "curriculum", "randomization", "perception",
                "reward", "observation", "max_episode_s", "track", "init", "time_cost",
-               "perception_cost", "crash_cost", "center_reward"]  # fmt: skip
+               "perception_cost", "crash_cost", "center_reward", "align_reward"]  # fmt: skip
 
 
 @settings(max_examples=300, deadline=None)

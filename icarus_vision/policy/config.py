@@ -145,6 +145,10 @@ class TrainConfig:
     center_reward: float | None = None
     """Reward per gate passed through its centre, falling linearly to 0 at the opening's edge
     (≥ 0; None: the preset's, 0)."""
+    align_reward: float | None = None
+    """Reward per gate passed straight through, times the cosine between the crossing and the
+    passage direction (0.5 of it at 60° off the normal; ≥ 0; None: the preset's, 0). Oblique
+    crossings are where gate collisions happen: an opening's window narrows with the angle."""
     observation: str = "basic"
     """"basic" (15-D), "extended" (21-D: adds the next gate's direction and the gate after) or
     "racing" (25-D: adds the next gate's opening side and the gate after's direction)."""
@@ -183,6 +187,8 @@ class TrainConfig:
             base = replace(base, crash=-self.crash_cost)
         if self.center_reward is not None:
             base = replace(base, center=self.center_reward)
+        if self.align_reward is not None:
+            base = replace(base, align=self.align_reward)
         return base
 
 
@@ -228,6 +234,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("perception_cost", c.perception_cost is None or c.perception_cost >= 0),
         ("crash_cost", c.crash_cost is None or c.crash_cost >= 0),
         ("center_reward", c.center_reward is None or c.center_reward >= 0),
+        ("align_reward", c.align_reward is None or c.align_reward >= 0),
         ("randomization.mass_pct", 0 <= c.randomization.mass_pct < 1),
         ("randomization.thrust_pct", 0 <= c.randomization.thrust_pct < 1),
         ("randomization.motor_tau_pct", 0 <= c.randomization.motor_tau_pct < 1),

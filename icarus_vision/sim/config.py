@@ -41,6 +41,10 @@ class RewardConfig:
     center: float = 0.0
     """Per gate passed, times how central the passage was: 1 through the centre, 0 at the
     opening's edge (1 − max(|y|, |z|) / half the opening), so margin from the frame pays."""
+    align: float = 0.0
+    """Per gate passed, times the cosine between the crossing step and the passage direction: 1
+    straight through, 0.5 at 60° off the gate's normal (``rules.crossing_alignment``), so setting
+    up for a gate before it pays (an oblique crossing leaves a narrower window)."""
 
 
 PROGRESS_REWARD = RewardConfig()

@@ -296,6 +296,9 @@ class RaceCore:
             extra["omega"] = state.omega
         if w.center:
             extra["centrality"] = np.where(passed, centrality, 0.0)
+        if w.align:
+            alignment = rules.crossing_alignment(p0, state.pos, gyaw)
+            extra["alignment"] = np.where(passed, alignment, 0.0)
         if w.action_change:
             a = self.prev_action if action is None else action
             extra["action_change"] = cost_action_change(a, self.prev_action)

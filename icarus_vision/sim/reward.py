@@ -108,13 +108,15 @@ def compute_reward(
     omega: np.ndarray | None = None,
     action_change: np.ndarray | None = None,
     centrality: np.ndarray | None = None,
+    alignment: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Weighted sum of the named terms.
 
     The optional inputs are needed only when their term's weight is non-zero: ``line`` (N,) from
     ``reward_line``, ``camera_angle`` (N,) from ``camera_gate_angle``, ``omega`` (N, 3) body rates,
     ``action_change`` (N,) from ``cost_action_change``, ``centrality`` (N,) from
-    ``rules.gate_crossing`` (0 where no gate was passed).
+    ``rules.gate_crossing`` (0 where no gate was passed), ``alignment`` (N,) from
+    ``rules.crossing_alignment`` (0 where no gate was passed).
 
     Returns:
         reward: (N,) float64.
@@ -142,5 +144,7 @@ def compute_reward(
         terms["action_change"] = cfg.action_change * action_change
     if cfg.center:
         terms["center"] = cfg.center * centrality
+    if cfg.align:
+        terms["align"] = cfg.align * alignment
     total = sum(terms.values())
     return total, terms

@@ -186,6 +186,19 @@ def gate_crossing(
     return passed, np.where(passed, 1.0 - offset, 0.0)
 
 
+def crossing_alignment(p0: np.ndarray, p1: np.ndarray, gate_yaw: np.ndarray) -> np.ndarray:
+    """(N,) cosine between each step's direction p0 -> p1 and its gate's passage direction.
+
+    1 for a step straight through the gate, 0.5 for one 60° off its normal. A crossing that
+    oblique leaves a sphere of radius r a window of only ``size / 2 − r / cos`` either side of the
+    centre (0.1 m of a 0.8 m opening at 60° for r = 0.15 m, against 0.25 m straight through).
+    Zero-length steps give 0.
+    """
+    d = p1 - p0
+    along = np.cos(gate_yaw) * d[:, 0] + np.sin(gate_yaw) * d[:, 1]
+    return along / np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+
+
 def out_of_bounds(pos: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(N,) bool: position outside the box [lo, hi] ((N, 3) or (3,) each)."""
     return np.any((pos < lo) | (pos > hi), axis=-1)

@@ -255,7 +255,9 @@ def test_crash_cost_and_center_reward_replace_the_presets_weights():
     assert SPECIALIST.reward_config().crash == -10.0 and SPECIALIST.reward_config().center == 0.0
     r = replace(SPECIALIST, crash_cost=30.0, center_reward=5.0).reward_config()
     assert (r.crash, r.center) == (-30.0, 5.0)
-    for key in ("crash_cost", "center_reward"):
+    assert replace(SPECIALIST, align_reward=3.0).reward_config().align == 3.0
+    assert SPECIALIST.reward_config().align == 0.0
+    for key in ("crash_cost", "center_reward", "align_reward"):
         with pytest.raises(ValueError, match=key):
             config_from_dict({key: -1.0})
 

@@ -114,6 +114,44 @@ def test_center_term_pays_a_central_passage_only_when_weighted():
     assert "center" not in terms
 
 
+def test_crossing_alignment_is_the_cosine_to_the_passage_direction():
+    from icarus_vision.sim.rules import crossing_alignment
+
+    p0 = np.zeros((4, 3))
+    p1 = np.array([[0.2, 0, 0], [0.1, 0.1 * np.sqrt(3), 0], [0.1, 0.1, 0], [0.0, 0, 0]])
+    yaw = np.array([0.0, 0.0, np.pi / 4, 0.0])
+    assert crossing_alignment(p0, p1, yaw) == pytest.approx([1.0, 0.5, 1.0, 0.0])
+
+
+def test_align_term_pays_a_straight_passage_only_when_weighted():
+    from dataclasses import replace
+
+    cfg = replace(RACING_LINE_REWARD, align=4.0)
+    _, terms = _terms(cfg, passed=np.array([True]), alignment=np.array([0.5]))
+    assert terms["align"][0] == pytest.approx(2.0)
+    _, terms = _terms(RACING_LINE_REWARD, passed=np.array([True]), alignment=np.array([0.5]))
+    assert "align" not in terms
+
+
+@pytest.mark.parametrize(("vel", "expected"), [((5.0, 0.0), 4.0), ((5.0, 5.0), 4.0 / np.sqrt(2))])
+def test_env_pays_the_align_term_by_the_crossing_angle(vel, expected):
+    """Straight through the gate earns the whole align weight, 45° off its normal cos 45° of it."""
+    from dataclasses import replace
+
+    from icarus_vision.sim.track import Gate, Track
+
+    track = Track(name="one", gates=(Gate((2.0, 0.0, 1.0)),), start_pos=(0.0, 0.0, 1.0))
+    cfg = EnvConfig(track=track, reward=replace(RACING_LINE_REWARD, align=4.0))
+    env = BatchedRacingVecEnv(1, cfg, info_mode="full")
+    env.seed(0)
+    env.reset()
+    env.state.pos[0] = [1.95, -0.05 * vel[1] / vel[0], 1.0]
+    env.state.vel[0] = [vel[0], vel[1], 0.0]
+    _, _, done, infos = env.step(np.array([[0.0, 0.0, 0.0, 0.0]]))
+    assert done[0] and infos[0]["all_gates_passed"]
+    assert infos[0]["reward_terms"]["align"] == pytest.approx(expected, abs=0.05)
+
+
 def test_env_pays_the_center_term_on_a_gate_passage():
     """A drone that flies straight through a gate's centre earns the whole center weight."""
     from dataclasses import replace
