@@ -198,7 +198,7 @@ def sample_distractors(
 
 
 def _extra_distractor(recipe: Recipe, rng: np.random.Generator, xy, yaw: float) -> Distractor:
-    """A person, tree, net or banner (``distractors.extra_shapes``) standing at ``xy``."""
+    """A person, tree, net, banner or screen (``distractors.extra_shapes``) standing at ``xy``."""
     d = recipe.distractors
     shape = d.extra_shapes[int(rng.integers(len(d.extra_shapes)))]
     x, y = xy
@@ -223,6 +223,8 @@ def _extra_distractor(recipe: Recipe, rng: np.random.Generator, xy, yaw: float) 
         colour = _clip3(rng.uniform(0.0, 0.25, 3) if rng.random() < 0.6 else rng.uniform(0, 1, 3))
         return Distractor(shape, (x, y, h / 2), (w, h, float(rng.uniform(0.1, 0.4))), yaw,
                           Material("solid", colour))  # fmt: skip
+    if shape == "screen":
+        return _screen(recipe, rng, xy, yaw)
     w, h = float(rng.uniform(1.0, 4.0)), float(rng.uniform(0.4, 1.5))
     kind = PRINTED_KINDS[int(rng.integers(len(PRINTED_KINDS)))]
     c1, c2 = _hsv_color(rng, recipe.gates)
@@ -230,6 +232,26 @@ def _extra_distractor(recipe: Recipe, rng: np.random.Generator, xy, yaw: float) 
                      int(rng.integers(2**31)))  # fmt: skip
     z = h / 2 + float(rng.uniform(0.0, 2.5))
     return Distractor("banner", (x, y, z), (w, h, 0.03), yaw, board)
+
+
+def _screen(recipe: Recipe, rng: np.random.Generator, xy, yaw: float) -> Distractor:
+    """A monitor, window, door or whiteboard: a filled rectangle, square or not (the rectangles
+    of real rooms a detector must not take for gates), in a thin grey, black or white bezel."""
+    w = float(rng.uniform(0.4, 2.5))
+    h = w * float(rng.uniform(0.55, 1.8))
+    bezel = w * float(rng.uniform(0.015, 0.12))
+    grey = float(rng.uniform(0.0, 0.3) if rng.random() < 0.6 else rng.uniform(0.6, 1.0))
+    frame = Material("solid", _clip3(grey + rng.uniform(-0.03, 0.03, 3)))
+    c1, c2 = _hsv_color(rng, recipe.gates)
+    kind = ("solid", "noise", "stripes", *PRINTED_KINDS)[int(rng.integers(5))]
+    if kind == "solid" and rng.random() < 0.5:  # a switched-off screen, or a lit window
+        c1 = tuple(
+            _clip3(rng.uniform(0.0, 0.12, 3) if rng.random() < 0.5 else rng.uniform(0.8, 1, 3))
+        )
+    panel = Material(kind, _clip3(c1), _clip3(c2), max(w, h) / float(rng.uniform(1.0, 4.0)),
+                     int(rng.integers(2**31)))  # fmt: skip
+    z = h / 2 + bezel + float(rng.uniform(0.0, 2.5))
+    return Distractor("screen", (xy[0], xy[1], z), (w, h, bezel), yaw, frame, panel)
 
 
 def sample_hall(recipe: Recipe, rng: np.random.Generator, track: Track) -> Hall | None:

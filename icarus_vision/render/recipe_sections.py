@@ -90,6 +90,10 @@ class LightRanges:
     ground (:mod:`icarus_vision.render.shadows`)."""
 
 
+EXTRA_SHAPES = ("person", "tree", "net", "banner", "screen")
+"""Shapes ``DistractorRanges.extra_shapes`` may name."""
+
+
 @dataclass(frozen=True)
 class DistractorRanges:
     """Non-gate objects around the gates."""
@@ -108,7 +112,9 @@ class DistractorRanges:
     """Probability that a distractor that is not gate-like is one of ``extra_shapes``."""
     extra_shapes: tuple[str, ...] = ("person", "tree", "net", "banner")
     """Shapes of the later recipes: ``person`` (a body and a head, 1.5-1.9 m), ``tree`` (a trunk
-    and a crown), ``net`` (a fence of thin bars in a grid), ``banner`` (a thin printed board)."""
+    and a crown), ``net`` (a fence of thin bars in a grid), ``banner`` (a thin printed board),
+    ``screen`` (a filled rectangle in a bezel, 0.4-2.5 m wide, square or not: monitors, windows,
+    doors; not in the default, which the older recipes keep)."""
 
 
 @dataclass(frozen=True)

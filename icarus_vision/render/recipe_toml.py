@@ -14,6 +14,7 @@ from pathlib import Path
 
 from icarus_vision.fileio import read_toml
 from icarus_vision.render.recipe_sections import (
+    EXTRA_SHAPES,
     CameraJitter,
     DatasetSettings,
     DistractorRanges,
@@ -102,10 +103,10 @@ def _validate_later(obj, prefix: str, source: str) -> None:
         if obj.trim_prob > 0 and obj.trim_width[0] <= 0:
             raise _fail(source, f"{prefix}trim_width", "must be > 0")
     if isinstance(obj, DistractorRanges):
-        bad = [x for x in obj.extra_shapes if x not in ("person", "tree", "net", "banner")]
+        bad = [x for x in obj.extra_shapes if x not in EXTRA_SHAPES]
         if bad or (obj.extra_prob > 0 and not obj.extra_shapes):
             raise _fail(source, f"{prefix}extra_shapes",
-                        f"must be some of person, tree, net, banner, got {list(obj.extra_shapes)}")  # fmt: skip
+                        f"must be some of {', '.join(EXTRA_SHAPES)}, got {list(obj.extra_shapes)}")  # fmt: skip
     if isinstance(obj, CameraJitter):
         if not obj.aspects or any(not 0.2 <= a <= 5.0 for a in obj.aspects):
             raise _fail(

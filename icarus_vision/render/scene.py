@@ -204,7 +204,7 @@ class Scene:
         if d.shape == "box":
             mesh = box_mesh((0, 0, 0), (sx / 2, sy / 2, sz / 2), tile)
             return self._add_mesh(mesh, d.material, d.pos, math.radians(d.yaw_deg))
-        if d.shape in ("person", "tree", "net", "banner"):
+        if d.shape in ("person", "tree", "net", "banner", "screen"):
             return self._add_figure(d)
         if d.shape == "sphere":
             vis = p.createVisualShape(p.GEOM_SPHERE, radius=sx, physicsClientId=self.client)
@@ -223,10 +223,16 @@ class Scene:
         return body
 
     def _add_figure(self, d: Distractor) -> int:
-        """A person, tree, net or banner (:class:`Distractor`); the first part's body id."""
+        """A person, tree, net, banner or screen (:class:`Distractor`); the first part's body id."""
         sx, sy, sz = d.size
         x, y = d.pos[:2]
         yaw = math.radians(d.yaw_deg)
+        if d.shape == "screen":  # a bezel around a panel, facing x; the panel sits in its middle
+            bezel = self._add_mesh(frame_mesh(sx, sy, sz, 0.06, d.material.tile_m), d.material,
+                                   d.pos, yaw)  # fmt: skip
+            panel = box_mesh((0, 0, 0), (0.02, sx / 2, sy / 2), (d.material2 or d.material).tile_m)
+            self._add_mesh(panel, d.material2 or d.material, d.pos, yaw)
+            return bezel
         if d.shape == "banner":
             return self._add_mesh(box_mesh((0, 0, 0), (sz / 2, sx / 2, sy / 2), d.material.tile_m),
                                   d.material, d.pos, yaw)  # fmt: skip

@@ -13,7 +13,7 @@ import numpy as np
 from icarus_vision.render.textures import Material
 
 DISTRACTOR_SHAPES = ("box", "cylinder", "sphere", "frame", "arch", "pole", "person", "tree", "net",
-                     "banner")  # fmt: skip
+                     "banner", "screen")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -42,19 +42,21 @@ class Distractor:
     shape: str
     """One of ``box``, ``cylinder``, ``sphere``, ``frame`` (closed non-square frame), ``arch``
     (frame without its bottom bar), ``pole``, ``person``, ``tree``, ``net`` (a grid of thin bars)
-    or ``banner`` (a thin board)."""
+    ``banner`` (a thin board) or ``screen`` (a filled rectangle in a bezel: a monitor, a window,
+    a door, a whiteboard; square or not)."""
     pos: tuple[float, float, float]
     """World position of the object's centre, m."""
     size: tuple[float, float, float]
     """Extents, m: box x, y, z; cylinder/pole (radius, radius, height); sphere (radius, -, -);
     frame/arch (opening width, opening height, bar width); person/tree (width, -, height);
-    net (width, height, mesh cell); banner (width, height, thickness)."""
+    net (width, height, mesh cell); banner (width, height, thickness); screen (panel width, panel
+    height, bezel width)."""
     yaw_deg: float = 0.0
     """Heading about world z, degrees."""
     material: Material = field(default_factory=Material)
     """Surface look."""
     material2: Material | None = None
-    """A second part's look: a person's head, a tree's crown."""
+    """A second part's look: a person's head, a tree's crown, a screen's panel."""
 
     def __post_init__(self) -> None:
         if self.shape not in DISTRACTOR_SHAPES:
