@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 
 from icarus_vision.fileio import read_toml
+from icarus_vision.policy.features import FEATURES_VERSIONS
 from icarus_vision.sim.config import (
     PROGRESS_REWARD,
     RACING_LINE_REWARD,
@@ -152,6 +153,10 @@ class TrainConfig:
     observation: str = "basic"
     """"basic" (15-D), "extended" (21-D: adds the next gate's direction and the gate after) or
     "racing" (25-D: adds the next gate's opening side and the gate after's direction)."""
+    features: str = "v1"
+    """The policy's input transform (``policy/features.py``): "v1", or "v2" (adds the drone's place
+    and velocity in the next gate's frame and its straight-on crossing point; extended and racing
+    observations)."""
     max_episode_s: float | None = None
     """Episode time limit; None: the environment default (5 s + 3 s per gate)."""
     track: str | None = None
@@ -226,6 +231,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ),
         ("reward", c.reward in REWARD_PRESETS),
         ("observation", c.observation in OBS_DIMS),
+        ("features", c.features in FEATURES_VERSIONS),
         ("checkpoint_every", c.checkpoint_every >= 1),
         ("eval_every", c.eval_every >= 1),
         ("eval_episodes", c.eval_episodes >= 1),

@@ -18,7 +18,13 @@ from safetensors.numpy import load as load_safetensors
 from safetensors.numpy import save as save_safetensors
 
 from icarus_vision.fileio import atomic_write_bytes, atomic_write_json
-from icarus_vision.policy.features import FEATURES_VERSION, feature_dim, obs_to_features
+from icarus_vision.policy.features import (
+    FEATURES_V1,
+    FEATURES_V2,
+    FEATURES_VERSION,
+    feature_dim,
+    obs_to_features,
+)
 from icarus_vision.sim.observation import OBS_DIMS
 
 FORMAT = "icarus-policy-v1"
@@ -31,8 +37,15 @@ def _paths(path: str | Path) -> tuple[Path, Path]:
     return stem.with_suffix(".safetensors"), stem.with_suffix(".json")
 
 
-def export_sb3_policy(model, path: str | Path, observation: str, meta: dict | None = None) -> Path:
-    """Write a stable-baselines3 PPO MlpPolicy's actor as ``path``.safetensors + ``path``.json.
+def export_sb3_policy(
+    model,
+    path: str | Path,
+    observation: str,
+    meta: dict | None = None,
+    features: str = FEATURES_VERSION,
+) -> Path:
+    """Write a stable-baselines3 PPO MlpPolicy's actor as ``path``.safetensors + ``path``.json;
+    ``features`` names the feature transform it was trained on.
 
     Returns:
         The .safetensors path.
@@ -53,7 +66,7 @@ def export_sb3_policy(model, path: str | Path, observation: str, meta: dict | No
         "observation": observation,
         "obs_dim": OBS_DIMS[observation],
         "gate_frame": "world",
-        "features": FEATURES_VERSION,
+        "features": features,
         "hidden": [int(layer.out_features) for layer in layers],
         "activation": act,
         "action": ACTION,
@@ -83,6 +96,11 @@ class ExportedPolicy:
         return self.desc["observation"]
 
     @property
+    def features(self) -> str:
+        """The feature transform the policy reads (``features.FEATURES_V1`` or ``_V2``)."""
+        return self.desc["features"]
+
+    @property
     def name(self) -> str:
         return self.desc.get("meta", {}).get("name", self.path.stem)
 
@@ -102,7 +120,7 @@ class ExportedPolicy:
             raise ValueError(
                 f"policy {self.path} expects observations of {self.obs_dim} entries, got shape {obs.shape}"
             )
-        h = obs_to_features(x)
+        h = obs_to_features(x, self.features)
         for w, b in self.weights[:-1]:
             h = np.tanh(h @ w.T + b)
         w, b = self.weights[-1]
@@ -135,9 +153,9 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         raise ValueError(
             f"{js}: action convention {desc.get('action')!r}/{desc.get('action_dim')} does not match ctbr/4"
         )
-    if desc.get("features") != FEATURES_VERSION or desc.get("gate_frame") != "world":
+    if desc.get("features") not in (FEATURES_V1, FEATURES_V2) or desc.get("gate_frame") != "world":
         raise ValueError(
-            f"{js}: feature transform {desc.get('features')!r} (gate frame {desc.get('gate_frame')!r}) does not match {FEATURES_VERSION} (world)"
+            f"{js}: feature transform {desc.get('features')!r} (gate frame {desc.get('gate_frame')!r}) does not match {FEATURES_V1} or {FEATURES_V2} (world)"
         )
     if desc.get("obs_dim") not in OBS_DIMS.values():
         raise ValueError(
@@ -161,12 +179,17 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         weights = [(tensors[f"w{i}"], tensors[f"b{i}"]) for i in range(n)]
     except KeyError as e:
         raise ValueError(f"{st}: missing tensor {e}") from None
-    if weights[0][0].shape[1] != feature_dim(desc["obs_dim"]) or weights[-1][0].shape[0] != 4:
+    if (
+        weights[0][0].shape[1] != feature_dim(desc["obs_dim"], desc["features"])
+        or weights[-1][0].shape[0] != 4
+    ):
         raise ValueError(f"{st}: layer shapes do not match the description in {js.name}")
     return ExportedPolicy(weights, desc, st)
 
 
-def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
+def load_init_actor(
+    model, spec: str, observation: str, features: str = FEATURES_VERSION
+) -> ExportedPolicy:
     """Copy an exported policy's actor into a fresh stable-baselines3 PPO model (fine-tuning).
 
     A policy of a smaller observation than the run's (``basic`` into ``extended`` or ``racing``,
@@ -175,16 +198,18 @@ def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
     observation are the first ones of a larger: ``features.py``). Likewise a run with wider hidden
     layers (same depth) keeps the new units' fresh input weights and gives their outputs zero
     weight, so the wider actor computes exactly the exported one's actions and training grows the
-    new units from there.
+    new units from there. A version 1 policy of the basic or extended observation starts a
+    version 2 run the same way (version 2 appends its features after version 1's).
 
     Args:
         model: PPO with an MlpPolicy whose actor has the exported policy's hidden layers.
         spec: ``default`` (the shipped generalist), a shipped name, or a path to an exported policy.
         observation: the run's observation (``basic``, ``extended`` or ``racing``).
+        features: the run's feature transform.
 
     Raises:
-        ValueError: the policy reads a larger observation than the run's, or its layers differ
-            from the model's.
+        ValueError: the policy reads a larger observation than the run's, features the run's
+            transform does not start with, or its layers differ from the model's.
     """
     import torch
 
@@ -198,6 +223,14 @@ def load_init_actor(model, spec: str, observation: str) -> ExportedPolicy:
             f"{policy.path}: it reads the {policy.observation} observation ({policy.obs_dim} entries), "
             f"larger than this run's {observation} ({OBS_DIMS[observation]}); set observation = "
             f"{policy.observation!r} in the config"
+        )
+    if policy.features != features and (
+        policy.features == FEATURES_V2 or policy.observation == "racing"
+    ):
+        raise ValueError(
+            f"{policy.path}: it reads features {policy.features} of the {policy.observation} "
+            f"observation, which this run's {features} do not start with; set features = "
+            f"{'v2' if policy.features == FEATURES_V2 else 'v1'!r} in the config"
         )
     weights = list(policy.weights)
     pol = model.policy

@@ -8,6 +8,14 @@ The same numpy function runs in training (``FeatureVecEnv``) and in the exported
 
 Each layout's features start with those of the smaller one (16 ⊂ 21 ⊂ 24), so a policy can be
 fine-tuned on a larger observation by giving its first layer zero weights for the new features.
+
+Version 2 (``icarus-features-v2``) appends to the extended and racing layouts the drone's place
+and velocity in the next gate's own frame (along its passage direction, to its left, up) and where
+the drone would cross the gate's plane flying straight on: whether it is lined up with the opening,
+which version 1 gives only as a product of features (the gate vector and the passage direction)
+that the network must learn to multiply. Version 1's features are the first of version 2's, so a
+version 1 policy can be fine-tuned with version 2 (zero weights for the new ones); the basic
+layout is the same in both.
 """
 
 from __future__ import annotations
@@ -16,18 +24,36 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 BASIC_DIM, EXTENDED_DIM, RACING_DIM = 15, 21, 25
-FEATURES_VERSION = "icarus-features-v1"
+FEATURES_V1, FEATURES_V2 = "icarus-features-v1", "icarus-features-v2"
+FEATURES_VERSION = FEATURES_V1
+"""The default transform (every policy trained before version 2)."""
+FEATURES_VERSIONS = {"v1": FEATURES_V1, "v2": FEATURES_V2}
+"""Short names (train config ``features``) of the transforms."""
 POS_SCALE, VEL_SCALE, RATE_SCALE, CLIP = 5.0, 5.0, 5.0, 5.0
+NEAR_SCALE = 1.0
+"""Metres per unit of the gate-frame offsets (version 2): fine near the opening."""
+MAX_LOOKAHEAD_S = 2.0
+"""Longest straight-on flight to the gate's plane the crossing point extrapolates (version 2)."""
+GATE_FRAME_DIM = 8
 SIZE_REF = 1.0
 """Opening side (m) that the racing features read as 0 (they read the side minus this)."""
 _FEATURE_DIMS = {BASIC_DIM: 16, EXTENDED_DIM: 21, RACING_DIM: 24}
 
 
-def feature_dim(obs_dim: int) -> int:
-    """Number of features for an observation of ``obs_dim`` (15, 21 or 25)."""
+def feature_dim(obs_dim: int, version: str = FEATURES_V1) -> int:
+    """Number of features for an observation of ``obs_dim`` (15, 21 or 25) in ``version``."""
     if obs_dim not in _FEATURE_DIMS:
         raise ValueError(f"observation must have 15, 21 or 25 entries, got {obs_dim}")
-    return _FEATURE_DIMS[obs_dim]
+    _check_version(version)
+    extra = GATE_FRAME_DIM if version == FEATURES_V2 and obs_dim >= EXTENDED_DIM else 0
+    return _FEATURE_DIMS[obs_dim] + extra
+
+
+def _check_version(version: str) -> None:
+    if version not in (FEATURES_V1, FEATURES_V2):
+        raise ValueError(
+            f"unknown feature transform {version!r} (use {FEATURES_V1} or {FEATURES_V2})"
+        )
 
 
 def _yaw_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -35,11 +61,13 @@ def _yaw_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.stack((c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]), axis=1)
 
 
-def obs_to_features(obs: np.ndarray) -> np.ndarray:
+def obs_to_features(obs: np.ndarray, version: str = FEATURES_V1) -> np.ndarray:
     """Features of world-frame observations.
 
     Args:
         obs: (N, 15), (N, 21) or (N, 25) observations with world-frame gate vectors.
+        version: ``FEATURES_V1`` or ``FEATURES_V2`` (adds ``gate_frame_features`` to the extended
+            and racing layouts, after version 1's).
 
     Returns:
         (N, 16), (N, 21) or (N, 24) float32: altitude, velocity (heading frame), roll, pitch, body
@@ -51,7 +79,7 @@ def obs_to_features(obs: np.ndarray) -> np.ndarray:
     obs = np.asarray(obs, dtype=np.float64)
     if obs.ndim != 2:
         raise ValueError(f"obs must be (N, 15), (N, 21) or (N, 25), got shape {obs.shape}")
-    feature_dim(obs.shape[1])
+    feature_dim(obs.shape[1], version)
     yaw = obs[:, 8]
     c, s = np.cos(yaw), np.sin(yaw)
     gate = _yaw_frame(obs[:, 12:15], c, s)
@@ -72,27 +100,51 @@ def obs_to_features(obs: np.ndarray) -> np.ndarray:
         ]
     if obs.shape[1] == RACING_DIM:
         parts += [obs[:, 21:22] - SIZE_REF, _yaw_frame(obs[:, 22:25], c, s)[:, :2]]
+    if version == FEATURES_V2 and obs.shape[1] >= EXTENDED_DIM:
+        parts.append(gate_frame_features(obs))
     return np.clip(np.concatenate(parts, axis=1), -CLIP, CLIP).astype(np.float32)
 
 
-class FeatureVecEnv(VecEnvWrapper):
-    """Feeds ``obs_to_features`` of the wrapped VecEnv's observations to the learner."""
+def gate_frame_features(obs: np.ndarray) -> np.ndarray:
+    """(N, 8) the drone in the next gate's frame (extended or racing observations).
 
-    def __init__(self, venv: VecEnv) -> None:
+    Position (along the passage direction, negative before the gate, / ``POS_SCALE``; left and up
+    / ``NEAR_SCALE``), velocity (/ ``VEL_SCALE``) and the crossing point's left and up offsets
+    (/ ``NEAR_SCALE``) if the drone flew on straight at its velocity (at most ``MAX_LOOKAHEAD_S``,
+    at least 1 m/s toward the plane; its offsets now once past the plane).
+    """
+    heading = obs[:, 15:17] / np.maximum(np.linalg.norm(obs[:, 15:17], axis=1, keepdims=True), 1e-9)
+    c, s = heading[:, 0], heading[:, 1]
+    local = _yaw_frame(-obs[:, 12:15], c, s)
+    vel = _yaw_frame(obs[:, 3:6], c, s)
+    t = np.minimum(np.maximum(-local[:, 0], 0.0) / np.maximum(vel[:, 0], 1.0), MAX_LOOKAHEAD_S)
+    cross = local[:, 1:] + vel[:, 1:] * t[:, None]
+    return np.concatenate(
+        (local[:, :1] / POS_SCALE, local[:, 1:] / NEAR_SCALE, vel / VEL_SCALE, cross / NEAR_SCALE),
+        axis=1,
+    )
+
+
+class FeatureVecEnv(VecEnvWrapper):
+    """Feeds ``obs_to_features`` (of ``version``) of the wrapped VecEnv's observations to the
+    learner."""
+
+    def __init__(self, venv: VecEnv, version: str = FEATURES_V1) -> None:
         import gymnasium as gym
 
-        dim = feature_dim(venv.observation_space.shape[0])
+        self.version = version
+        dim = feature_dim(venv.observation_space.shape[0], version)
         space = gym.spaces.Box(-CLIP, CLIP, shape=(dim,), dtype=np.float32)
         super().__init__(venv, observation_space=space)
 
     def reset(self) -> np.ndarray:
-        return obs_to_features(self.venv.reset())
+        return obs_to_features(self.venv.reset(), self.version)
 
     def step_wait(self):
         obs, rew, done, infos = self.venv.step_wait()
         for i in np.flatnonzero(done):
             if "terminal_observation" in infos[i]:
                 infos[i]["terminal_observation"] = obs_to_features(
-                    infos[i]["terminal_observation"][None]
+                    infos[i]["terminal_observation"][None], self.version
                 )[0]
-        return obs_to_features(obs), rew, done, infos
+        return obs_to_features(obs, self.version), rew, done, infos

@@ -39,7 +39,7 @@ from icarus_vision.policy.config import (
     load_run_config,
 )
 from icarus_vision.policy.export import export_sb3_policy, load_init_actor
-from icarus_vision.policy.features import FeatureVecEnv
+from icarus_vision.policy.features import FEATURES_VERSIONS, FeatureVecEnv
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
@@ -93,7 +93,7 @@ def make_train_env(
             venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m,
             map_yaw_error_deg=cfg.perception.map_yaw_error_deg,
         )  # fmt: skip
-    return FeatureVecEnv(venv)
+    return FeatureVecEnv(venv, FEATURES_VERSIONS[cfg.features])
 
 
 LAP_WEIGHT = 0.1
@@ -246,7 +246,7 @@ def train_policy(
         with torch.no_grad():  # start from hover: mean thrust action balances gravity
             model.policy.action_net.bias[0] = QuadParams().hover_thrust_action
         if cfg.init is not None:
-            load_init_actor(model, cfg.init, cfg.observation)
+            load_init_actor(model, cfg.init, cfg.observation, FEATURES_VERSIONS[cfg.features])
 
     curriculum = CurriculumCallback(stages, stage=stage, verbose=verbose)
     metrics = MetricsCallback(curriculum, progress=progress)
@@ -288,7 +288,9 @@ def train_policy(
                         "eval_success": ev.success,
                         "eval_lap_per_gate_s": ev.lap_per_gate_s,
                     }
-                    export_sb3_policy(model, out / "best", cfg.observation, meta)
+                    export_sb3_policy(
+                        model, out / "best", cfg.observation, meta, FEATURES_VERSIONS[cfg.features]
+                    )
             if self.num_timesteps >= self.next_ckpt:
                 self.next_ckpt += cfg.checkpoint_every
                 _save_checkpoint(model, ckpt_dir, snapshot())
@@ -318,7 +320,9 @@ def train_policy(
     atomic_write_json(out / "metrics.json", metrics.rows)
     meta = {"name": out.name, "timesteps": int(model.num_timesteps), "num_gates": curriculum.num_gates,
             "seed": seed, "preset": cfg.preset}  # fmt: skip
-    policy_path = export_sb3_policy(model, out / "policy", cfg.observation, meta)
+    policy_path = export_sb3_policy(
+        model, out / "policy", cfg.observation, meta, FEATURES_VERSIONS[cfg.features]
+    )
     if not (out / "best.safetensors").exists():
         for ext in (".safetensors", ".json"):
             shutil.copyfile(out / f"policy{ext}", out / f"best{ext}")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from icarus_vision.policy.config import PerceptionNoiseConfig
-from icarus_vision.policy.features import obs_to_features
+from icarus_vision.policy.features import FEATURES_V2, feature_dim, obs_to_features
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoise
 
 
@@ -53,6 +53,46 @@ def test_racing_features_extend_the_extended_ones_and_turn_with_the_world():
         c, s = np.cos(0.7), np.sin(0.7)
         turned[:, sl] = obs[:, sl] @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T
     np.testing.assert_allclose(obs_to_features(turned), f, atol=1e-5)
+
+
+def test_v2_features_add_the_drone_in_the_gate_frame_and_its_crossing_point():
+    """A drone 2 m before a gate facing +y, 0.3 m to its left and 0.2 m low, flying at 5 m/s
+    through the plane and 1 m/s further left: it would cross 0.3 + 1 * 0.4 = 0.7 m left."""
+    obs = np.zeros((1, 21), np.float32)
+    obs[0, 0:3] = (-0.3, -2.0, 1.8)  # drone; the gate is at (0, 0, 2), passage direction +y
+    obs[0, 3:6] = (-1.0, 5.0, 0.0)
+    obs[0, 8] = 0.4  # any heading: the gate-frame features do not depend on it
+    obs[0, 12:15] = (0.3, 2.0, 0.2)
+    obs[0, 15:18] = (0.0, 1.0, 0.0)
+    f = obs_to_features(obs, FEATURES_V2)
+    assert f.shape == (1, feature_dim(21, FEATURES_V2)) == (1, 29)
+    np.testing.assert_array_equal(f[:, :21], obs_to_features(obs))
+    np.testing.assert_allclose(
+        f[0, 21:], [-2.0 / 5, 0.3, -0.2, 1.0, 0.2, 0.0, 0.7, -0.2], atol=1e-6
+    )
+    past = obs.copy()
+    past[0, 12:15] = (0.3, -0.5, 0.2)  # 0.5 m past the plane: the crossing is where it is
+    np.testing.assert_allclose(obs_to_features(past, FEATURES_V2)[0, 27:], [0.3, -0.2], atol=1e-6)
+
+
+def test_v2_features_turn_with_the_world_and_leave_basic_alone():
+    rng = np.random.default_rng(4)
+    obs = rng.normal(0, 2, (20, 25)).astype(np.float32)
+    obs[:, 6:8] = rng.uniform(-0.5, 0.5, (20, 2))
+    yaw = rng.uniform(-np.pi, np.pi, 20)
+    obs[:, 15:18] = np.stack((np.cos(yaw), np.sin(yaw), 0 * yaw), axis=1)
+    f = obs_to_features(obs, FEATURES_V2)
+    assert f.shape == (20, 32)
+    np.testing.assert_array_equal(f[:, :24], obs_to_features(obs))
+    turned = rotate_world(obs, -2.1)
+    c, s = np.cos(-2.1), np.sin(-2.1)
+    for sl in (slice(15, 18), slice(18, 21), slice(22, 25)):
+        turned[:, sl] = obs[:, sl] @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T
+    np.testing.assert_allclose(obs_to_features(turned, FEATURES_V2), f, atol=1e-4)
+    basic = obs[:, :15]
+    np.testing.assert_array_equal(obs_to_features(basic, FEATURES_V2), obs_to_features(basic))
+    with pytest.raises(ValueError, match="unknown feature transform"):
+        obs_to_features(basic, "icarus-features-v9")
 
 
 def test_perception_noise_has_the_error_model_statistics():

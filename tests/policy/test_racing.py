@@ -18,8 +18,8 @@ from icarus_vision.policy.config import (
     PPOConfig,
     config_from_dict,
 )
-from icarus_vision.policy.export import load_init_actor, load_policy
-from icarus_vision.policy.features import obs_to_features
+from icarus_vision.policy.export import export_sb3_policy, load_init_actor, load_policy
+from icarus_vision.policy.features import FEATURES_V2, obs_to_features
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoise, gate_in_view
 from icarus_vision.policy.pilots import (
     auto_policy_name,
@@ -135,11 +135,12 @@ def test_shipped_policies_load_without_pickles():
         assert pol.act(np.zeros(pol.obs_dim, np.float32)).shape == (4,)
 
 
-def _tiny_ppo(observation: str = "extended", net_arch=(64, 64)):
+def _tiny_ppo(observation: str = "extended", net_arch=(64, 64), features: str = "v1"):
     """An untrained PPO on a 4-drone specialist training env with ``observation``."""
     cfg = replace(
-        SPECIALIST, observation=observation, ppo=replace(SPECIALIST.ppo, num_envs=4, batch_size=64)
-    )
+        SPECIALIST, observation=observation, features=features,
+        ppo=replace(SPECIALIST.ppo, num_envs=4, batch_size=64),
+    )  # fmt: skip
     env = make_train_env(cfg, 4, 3, seed=0)
     kwargs = {"net_arch": list(net_arch)}
     return PPO("MlpPolicy", env, policy_kwargs=kwargs, device="cpu", n_steps=8, batch_size=32)
@@ -186,6 +187,34 @@ def test_init_widens_the_hidden_layers_without_changing_the_actions():
     assert not model.policy.action_net.weight.detach().numpy()[:, 64:].any()
     with pytest.raises(ValueError, match="at least as wide"):
         load_init_actor(_tiny_ppo(net_arch=(64, 32)), "default", "extended")
+
+
+def test_init_starts_v2_features_from_a_v1_policy_and_exports_them(tmp_path):
+    """The shipped (v1) generalist starts a v2 run: zero weights for the gate-frame features, so
+    it flies as before; the export says v2 and loads back to the same actions; the reverse and a
+    v1 racing policy (whose features v2 does not start with) are refused."""
+    model = _tiny_ppo(features="v2")
+    assert model.observation_space.shape == (29,)
+    policy = load_init_actor(model, "default", "extended", FEATURES_V2)
+    obs = np.random.default_rng(5).normal(size=(16, 21)).astype(np.float32)
+    mean, _ = model.predict(obs_to_features(obs, FEATURES_V2), deterministic=True)
+    assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs), abs=1e-5)
+    assert not model.policy.mlp_extractor.policy_net[0].weight.detach().numpy()[:, 21:].any()
+    export_sb3_policy(model, tmp_path / "v2", "extended", {}, FEATURES_V2)
+    back = load_policy(tmp_path / "v2")
+    assert back.features == FEATURES_V2 and back.act(obs) == pytest.approx(
+        policy.act(obs), abs=1e-5
+    )
+    with pytest.raises(ValueError, match="features = 'v2'"):
+        load_init_actor(_tiny_ppo(), str(tmp_path / "v2"), "extended")
+    racing = _tiny_ppo("racing")
+    export_sb3_policy(racing, tmp_path / "r1", "racing", {})
+    with pytest.raises(ValueError, match="do not start with"):
+        load_init_actor(
+            _tiny_ppo("racing", features="v2"), str(tmp_path / "r1"), "racing", FEATURES_V2
+        )
+    with pytest.raises(ValueError, match="features"):
+        config_from_dict({"features": "v3"})
 
 
 def test_difficulty_curriculum_config_is_validated():
