@@ -1,7 +1,7 @@
 """The detector on real photographs of real gates: precision, recall and corner error.
 
     .venv/bin/python benchmarks/real_gates.py [--detector cnn] [--sets ../shared/real-gates]
-        [--min-gate-px 20] [--json PATH]
+        [--min-gate-px 20] [--backend auto] [--json PATH]
 
 Reads the measurement-only sets of ``../shared/real-gates/`` (never trained on, never copied into
 the project): ``alphapilot/`` (11 AIRR photos, 1296x864, AlphaPilot's label JSON) and
@@ -35,10 +35,14 @@ def main() -> None:
         "--sets", default=str(Path(__file__).resolve().parents[2] / "shared" / "real-gates")
     )
     ap.add_argument("--min-gate-px", type=float, default=20.0)
+    ap.add_argument(
+        "--backend", default=None,
+        help="what runs a CNN's networks: auto (default), int8, onnxruntime or torch",
+    )  # fmt: skip
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     root = Path(args.sets)
-    out = {"detector": args.detector, "min_gate_px": args.min_gate_px, "sets": {}}
+    out = {"detector": args.detector, "backend": args.backend, "min_gate_px": args.min_gate_px, "sets": {}}
     with tempfile.TemporaryDirectory(prefix="icarus-real-") as tmp:
         for name, (fmt, labels, unlabelled) in SETS.items():
             if not (root / labels).is_file():
@@ -46,7 +50,10 @@ def main() -> None:
                 continue
             folder = Path(tmp) / name
             import_gates(fmt, root / labels, folder, unlabelled=unlabelled)
-            r = eval_detector(folder, args.detector, min_gate_px=args.min_gate_px, resamples=0)
+            r = eval_detector(
+                folder, args.detector, min_gate_px=args.min_gate_px, resamples=0,
+                backend=args.backend,
+            )  # fmt: skip
             row = {
                 "images": r["images"], "gates": r["gates"], "precision": r["precision"],
                 "recall": r["recall"], "false_positives": r["false_positives"],
