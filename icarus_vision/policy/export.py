@@ -198,8 +198,9 @@ def load_init_actor(
     observation are the first ones of a larger: ``features.py``). Likewise a run with wider hidden
     layers (same depth) keeps the new units' fresh input weights and gives their outputs zero
     weight, so the wider actor computes exactly the exported one's actions and training grows the
-    new units from there. A version 1 policy of the basic or extended observation starts a
-    version 2 run the same way (version 2 appends its features after version 1's).
+    new units from there. A version 1 policy starts a version 2 run the same way (version 2
+    appends its features after version 1's); a version 2 policy continues only with version 2
+    features of its own observation.
 
     Args:
         model: PPO with an MlpPolicy whose actor has the exported policy's hidden layers.
@@ -224,13 +225,15 @@ def load_init_actor(
             f"larger than this run's {observation} ({OBS_DIMS[observation]}); set observation = "
             f"{policy.observation!r} in the config"
         )
-    if policy.features != features and (
-        policy.features == FEATURES_V2 or policy.observation == "racing"
+    # Version 2 appends its gate-frame features after the layout's version 1 ones, so a
+    # version 2 policy's features begin no other layout's or version's.
+    if policy.features == FEATURES_V2 and (
+        features != FEATURES_V2 or policy.obs_dim != OBS_DIMS[observation]
     ):
         raise ValueError(
             f"{policy.path}: it reads features {policy.features} of the {policy.observation} "
-            f"observation, which this run's {features} do not start with; set features = "
-            f"{'v2' if policy.features == FEATURES_V2 else 'v1'!r} in the config"
+            f"observation, which this run's ({features}, {observation}) do not start with; set "
+            f"features = 'v2' and observation = {policy.observation!r} in the config"
         )
     weights = list(policy.weights)
     pol = model.policy
