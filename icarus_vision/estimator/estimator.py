@@ -273,7 +273,7 @@ class GateEstimator:
             update_tracks([self.tracks[ti] for ti in chosen], list(chosen.values()), odom.t)
             self.counts["accepted"] += len(chosen)
         for m in unmatched:
-            self._unmatched(m, odom.t)
+            self._unmatched(m, odom.t, r_wc, t_wc)
         return self._target_track() in chosen
 
     def _size_guess(self) -> float:
@@ -281,7 +281,20 @@ class GateEstimator:
             self.tracks[0].size if self.prior is not None and self.tracks else self.config.gate_size
         )
 
-    def _unmatched(self, m: GateMeasurement, t: float) -> None:
+    def _in_view(self, track: GateTrack, r_wc: np.ndarray, t_wc: np.ndarray) -> bool:
+        """Whether the whole opening of ``track``'s estimate lies in front of the camera and
+        inside the image: where vision would see the gate if the map were right."""
+        c, s, h = math.cos(track.mean[3]), math.sin(track.mean[3]), track.size / 2.0
+        corners = np.array([[-s * y, c * y, z] for y in (-h, h) for z in (-h, h)]) + track.pos
+        cam = (corners - t_wc) @ r_wc
+        if (cam[:, 2] < 0.1).any():
+            return False
+        uv = cam @ self._k.T
+        uv = uv[:, :2] / uv[:, 2:]
+        w, hgt = self._image_size
+        return bool((uv >= 0).all() and (uv[:, 0] < w).all() and (uv[:, 1] < hgt).all())
+
+    def _unmatched(self, m: GateMeasurement, t: float, r_wc: np.ndarray, t_wc: np.ndarray) -> None:
         """A detection no gate explains: an outlier, a wrong prior, or (map-free) a new gate."""
         fc = self.config.filter
         if self.config.mode == "map-free":
@@ -304,9 +317,15 @@ class GateEstimator:
             return
         dists = [float(np.linalg.norm(tr.pos - m.pos)) for tr in self.tracks]
         ti = int(np.argmin(dists))
-        # Only a gate that vision has not confirmed lately is moved: a persistent false detection
-        # next to a gate that is being measured well stays an outlier.
-        if dists[ti] <= fc.reinit_radius_m and t - self.tracks[ti].last_hit_t > fc.reinit_window_s:
+        # Only a gate that vision has not confirmed lately, though the map puts it in view, is
+        # moved: a persistent false detection next to a gate that is being measured well, or
+        # next to one the camera cannot see (just flown through, behind or beside the drone),
+        # stays an outlier.
+        if (
+            dists[ti] <= fc.reinit_radius_m
+            and t - self.tracks[ti].last_hit_t > fc.reinit_window_s
+            and self._in_view(self.tracks[ti], r_wc, t_wc)
+        ):
             self.tracks[ti].reinit(m, t)
             self.counts["reinit"] += 1
             self._rejected.clear()

@@ -76,6 +76,32 @@ def test_rejects_injected_outliers(two_gates):
     assert est.counts["reinit"] == 0
 
 
+@pytest.mark.parametrize("turned", [False, True])
+def test_a_gate_out_of_view_is_not_moved_to_a_persistent_false_detection(two_gates, turned):
+    """Just through gate 0 and turning back toward it (a hairpin), the camera sees a gate-like
+    thing 2 m from where gate 0 is, frame after frame, and never gate 0 itself. Facing away
+    from gate 0 its silence says nothing about the map: it stays put. Facing it, the map puts it
+    in view and vision does not find it there: the map is re-initialised to what vision sees."""
+    est = GateEstimator(CAM, EstimatorConfig(), two_gates)
+    oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+    _fly(est, oracle, 0.0, 1.0, 0.0, 6.5)  # approach and pass gate 0
+    # Turned: 3 m past gate 0 facing it, the false gate 1.9 m beside it. Not turned: just past
+    # gate 0, facing on, the false gate 2.5 m ahead of it.
+    here, yaw, false_gate = ((9.0, np.pi, (6.0, 1.9, 2.3)) if turned else
+                             (6.5, 0.0, (8.5, 0.6, 2.3)))  # fmt: skip
+    fake = OracleDetector(Track("fake", (Gate(false_gate, yaw_deg=180.0 * turned),)), CAM, seed=1)
+    for t in np.arange(1.0, 2.0, 1.0 / RATE):
+        od = odom_at(t, [here, 0.0, 2.0], yaw=yaw)
+        assert fake.detect_pose(od.pos, od.quat)
+        est.update(od, fake.detect_pose(od.pos, od.quat))
+    moved = np.linalg.norm(est.tracks[0].pos - np.array([6.0, 0.0, 2.0]))
+    assert est.counts["outliers"] >= 3
+    if turned:
+        assert est.counts["reinit"] == 1 and moved > 1.0
+    else:
+        assert est.counts["reinit"] == 0 and moved < 0.05
+
+
 def test_survives_a_second_without_detections(two_gates):
     est = GateEstimator(CAM, EstimatorConfig(), displaced_map(two_gates, 0.2, 3.0, seed=1))
     oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
