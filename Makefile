@@ -52,8 +52,10 @@ train-generalist: $(STAMP)
 	cp runs/policy-racing-speed/best.safetensors icarus_vision/models/policy/racing.safetensors
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-vision.toml --seed 0 --out runs/policy-racing-vision --timesteps 33411328
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-vision-more.toml --seed 0 --out runs/policy-racing-vision-more --timesteps 20000000
-	cp runs/policy-racing-vision-more/best.json icarus_vision/models/policy/default.json
-	cp runs/policy-racing-vision-more/best.safetensors icarus_vision/models/policy/default.safetensors
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-gateframe.toml --seed 0 --out runs/policy-racing-gateframe --timesteps 20000000
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-gateframe-more.toml --seed 0 --out runs/policy-racing-gateframe-more --timesteps 20000000
+	cp runs/policy-racing-gateframe-more/best.json icarus_vision/models/policy/default.json
+	cp runs/policy-racing-gateframe-more/best.safetensors icarus_vision/models/policy/default.safetensors
 
 # The shipped specialists (models/policy/<track>-specialist.*, from each run's policy.*), side by side.
 train-specialists: $(STAMP)

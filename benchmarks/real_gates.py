@@ -42,7 +42,12 @@ def main() -> None:
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     root = Path(args.sets)
-    out = {"detector": args.detector, "backend": args.backend, "min_gate_px": args.min_gate_px, "sets": {}}
+    out = {
+        "detector": args.detector,
+        "backend": args.backend,
+        "min_gate_px": args.min_gate_px,
+        "sets": {},
+    }
     with tempfile.TemporaryDirectory(prefix="icarus-real-") as tmp:
         for name, (fmt, labels, unlabelled) in SETS.items():
             if not (root / labels).is_file():

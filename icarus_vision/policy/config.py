@@ -153,10 +153,11 @@ class TrainConfig:
     observation: str = "basic"
     """"basic" (15-D), "extended" (21-D: adds the next gate's direction and the gate after) or
     "racing" (25-D: adds the next gate's opening side and the gate after's direction)."""
-    features: str = "v1"
+    features: str | None = None
     """The policy's input transform (``policy/features.py``): "v1", or "v2" (adds the drone's place
     and velocity in the next gate's frame and its straight-on crossing point; extended and racing
-    observations)."""
+    observations); None: the ``init`` policy's (so ``--init default`` continues the shipped
+    generalist as it reads), v1 without one."""
     max_episode_s: float | None = None
     """Episode time limit; None: the environment default (5 s + 3 s per gate)."""
     track: str | None = None
@@ -231,7 +232,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ),
         ("reward", c.reward in REWARD_PRESETS),
         ("observation", c.observation in OBS_DIMS),
-        ("features", c.features in FEATURES_VERSIONS),
+        ("features", c.features is None or c.features in FEATURES_VERSIONS),
         ("checkpoint_every", c.checkpoint_every >= 1),
         ("eval_every", c.eval_every >= 1),
         ("eval_episodes", c.eval_episodes >= 1),

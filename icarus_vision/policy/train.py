@@ -38,8 +38,8 @@ from icarus_vision.policy.config import (
     config_to_dict,
     load_run_config,
 )
-from icarus_vision.policy.export import export_sb3_policy, load_init_actor
-from icarus_vision.policy.features import FEATURES_VERSIONS, FeatureVecEnv
+from icarus_vision.policy.export import ExportedPolicy, export_sb3_policy, load_init_actor
+from icarus_vision.policy.features import FEATURES_V1, FEATURES_VERSIONS, FeatureVecEnv
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
@@ -63,6 +63,19 @@ def curriculum_of(cfg: TrainConfig) -> CurriculumConfig:
         return cfg.curriculum
     n = len(resolve_track(cfg.track).gates)
     return replace(cfg.curriculum, stages=(n,), difficulty=None)
+
+
+def run_features(cfg: TrainConfig) -> str:
+    """The feature transform a run trains: the config's, else its ``init`` policy's, else v1."""
+    if cfg.features is not None:
+        return FEATURES_VERSIONS[cfg.features]
+    if cfg.init is not None:
+        from icarus_vision.policy.pilots import resolve_policy
+
+        policy = resolve_policy(cfg.init)
+        if isinstance(policy, ExportedPolicy):
+            return policy.features
+    return FEATURES_V1
 
 
 def make_train_env(
@@ -93,7 +106,7 @@ def make_train_env(
             venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m,
             map_yaw_error_deg=cfg.perception.map_yaw_error_deg,
         )  # fmt: skip
-    return FeatureVecEnv(venv, FEATURES_VERSIONS[cfg.features])
+    return FeatureVecEnv(venv, run_features(cfg))
 
 
 LAP_WEIGHT = 0.1
@@ -214,6 +227,7 @@ def train_policy(
         raise ValueError(
             f"{ckpt_dir / 'last_state.json'}: curriculum stage {stage} is out of range for this config"
         )
+    features = run_features(cfg)
     env = make_train_env(cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage))
     if resume:
         try:
@@ -246,7 +260,7 @@ def train_policy(
         with torch.no_grad():  # start from hover: mean thrust action balances gravity
             model.policy.action_net.bias[0] = QuadParams().hover_thrust_action
         if cfg.init is not None:
-            load_init_actor(model, cfg.init, cfg.observation, FEATURES_VERSIONS[cfg.features])
+            load_init_actor(model, cfg.init, cfg.observation, features)
 
     curriculum = CurriculumCallback(stages, stage=stage, verbose=verbose)
     metrics = MetricsCallback(curriculum, progress=progress)
@@ -288,9 +302,7 @@ def train_policy(
                         "eval_success": ev.success,
                         "eval_lap_per_gate_s": ev.lap_per_gate_s,
                     }
-                    export_sb3_policy(
-                        model, out / "best", cfg.observation, meta, FEATURES_VERSIONS[cfg.features]
-                    )
+                    export_sb3_policy(model, out / "best", cfg.observation, meta, features)
             if self.num_timesteps >= self.next_ckpt:
                 self.next_ckpt += cfg.checkpoint_every
                 _save_checkpoint(model, ckpt_dir, snapshot())
@@ -320,9 +332,7 @@ def train_policy(
     atomic_write_json(out / "metrics.json", metrics.rows)
     meta = {"name": out.name, "timesteps": int(model.num_timesteps), "num_gates": curriculum.num_gates,
             "seed": seed, "preset": cfg.preset}  # fmt: skip
-    policy_path = export_sb3_policy(
-        model, out / "policy", cfg.observation, meta, FEATURES_VERSIONS[cfg.features]
-    )
+    policy_path = export_sb3_policy(model, out / "policy", cfg.observation, meta, features)
     if not (out / "best.safetensors").exists():
         for ext in (".safetensors", ".json"):
             shutil.copyfile(out / f"policy{ext}", out / f"best{ext}")

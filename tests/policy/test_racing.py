@@ -19,7 +19,7 @@ from icarus_vision.policy.config import (
     config_from_dict,
 )
 from icarus_vision.policy.export import export_sb3_policy, load_init_actor, load_policy
-from icarus_vision.policy.features import FEATURES_V2, obs_to_features
+from icarus_vision.policy.features import FEATURES_V1, FEATURES_V2, obs_to_features
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoise, gate_in_view
 from icarus_vision.policy.pilots import (
     auto_policy_name,
@@ -27,7 +27,7 @@ from icarus_vision.policy.pilots import (
     shipped_policies,
     shipped_policy_path,
 )
-from icarus_vision.policy.train import make_train_env, train_policy
+from icarus_vision.policy.train import make_train_env, run_features, train_policy
 from icarus_vision.sim.builtin import builtin_track
 from icarus_vision.sim.config import RACING_LINE_REWARD
 from icarus_vision.sim.quad import CameraParams
@@ -148,23 +148,23 @@ def _tiny_ppo(observation: str = "extended", net_arch=(64, 64), features: str = 
 
 def test_init_copies_the_exported_actor_and_refuses_mismatches():
     model = _tiny_ppo()
-    policy = load_init_actor(model, "default", "extended")
+    policy = load_init_actor(model, "racing", "extended")
     obs = np.random.default_rng(0).normal(size=(16, 21)).astype(np.float32)
     mean, _ = model.predict(obs_to_features(obs), deterministic=True)
     assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs), abs=1e-5)
     small = _tiny_ppo(net_arch=(32,))
     with pytest.raises(ValueError, match="do not match"):
-        load_init_actor(small, "default", "extended")
+        load_init_actor(small, "racing", "extended")
     with pytest.raises(ValueError, match="larger than this run's basic"):
-        load_init_actor(model, "default", "basic")
+        load_init_actor(model, "racing", "basic")
 
 
 def test_init_widens_a_smaller_observation_with_zero_weights():
-    """The shipped (extended) generalist fine-tuned on the racing observation flies as before,
+    """A shipped (extended, v1) generalist fine-tuned on the racing observation flies as before,
     whatever the new entries say, until training gives them weight."""
     model = _tiny_ppo("racing")
     assert model.observation_space.shape == (24,)
-    policy = load_init_actor(model, "default", "racing")
+    policy = load_init_actor(model, "racing", "racing")
     assert policy.observation == "extended"
     obs = np.random.default_rng(1).normal(size=(16, 25)).astype(np.float32)
     obs[:, 21] = np.random.default_rng(2).uniform(0.8, 1.5, 16)
@@ -178,7 +178,7 @@ def test_init_widens_the_hidden_layers_without_changing_the_actions():
     """A wider network (same depth) starts from the exported actor: the new units have zero
     outgoing weight, so the actions are the exported policy's; a narrower one is refused."""
     model = _tiny_ppo("racing", net_arch=(96, 80))
-    policy = load_init_actor(model, "default", "racing")
+    policy = load_init_actor(model, "racing", "racing")
     obs = np.random.default_rng(3).normal(size=(16, 25)).astype(np.float32)
     mean, _ = model.predict(obs_to_features(obs), deterministic=True)
     assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs[:, :21]), abs=1e-5)
@@ -186,16 +186,16 @@ def test_init_widens_the_hidden_layers_without_changing_the_actions():
     assert hidden.shape == (80, 96) and not hidden[:64, 64:].any() and hidden[64:].any()
     assert not model.policy.action_net.weight.detach().numpy()[:, 64:].any()
     with pytest.raises(ValueError, match="at least as wide"):
-        load_init_actor(_tiny_ppo(net_arch=(64, 32)), "default", "extended")
+        load_init_actor(_tiny_ppo(net_arch=(64, 32)), "racing", "extended")
 
 
 def test_init_starts_v2_features_from_a_v1_policy_and_exports_them(tmp_path):
-    """The shipped (v1) generalist starts a v2 run: zero weights for the gate-frame features, so
+    """A shipped v1 generalist (`racing`) starts a v2 run: zero weights for the gate-frame features, so
     it flies as before; the export says v2 and loads back to the same actions; a v2 policy is
     refused by a v1 run and by a larger observation (its features do not begin theirs)."""
     model = _tiny_ppo(features="v2")
     assert model.observation_space.shape == (29,)
-    policy = load_init_actor(model, "default", "extended", FEATURES_V2)
+    policy = load_init_actor(model, "racing", "extended", FEATURES_V2)
     obs = np.random.default_rng(5).normal(size=(16, 21)).astype(np.float32)
     mean, _ = model.predict(obs_to_features(obs, FEATURES_V2), deterministic=True)
     assert np.clip(mean, -1, 1) == pytest.approx(policy.act(obs), abs=1e-5)
@@ -212,9 +212,21 @@ def test_init_starts_v2_features_from_a_v1_policy_and_exports_them(tmp_path):
             _tiny_ppo("racing", features="v2"), str(tmp_path / "v2"), "racing", FEATURES_V2
         )
     racing = _tiny_ppo("racing", features="v2")  # a v1 policy's features begin v2 racing's
-    assert load_init_actor(racing, "default", "racing", FEATURES_V2).features != FEATURES_V2
+    assert load_init_actor(racing, "racing", "racing", FEATURES_V2).features != FEATURES_V2
     with pytest.raises(ValueError, match="features"):
         config_from_dict({"features": "v3"})
+
+
+def test_a_run_reads_its_init_policys_features_unless_told():
+    """`--init default` continues the shipped generalist with the features it reads (v2);
+    a v1 policy, no policy, or the config's own choice gives those."""
+    assert load_policy(shipped_policy_path("default")).features == FEATURES_V2
+    assert run_features(SPECIALIST) == FEATURES_V2  # its init is "default"
+    assert run_features(replace(SPECIALIST, init="racing")) == FEATURES_V1
+    assert run_features(replace(SPECIALIST, init=None)) == FEATURES_V1
+    assert run_features(replace(SPECIALIST, init="racing", features="v2")) == FEATURES_V2
+    env = make_train_env(SPECIALIST, 2, 3, 0)
+    assert env.observation_space.shape == (29,)
 
 
 def test_difficulty_curriculum_config_is_validated():
