@@ -15,7 +15,8 @@ the drone would cross the gate's plane flying straight on: whether it is lined u
 which version 1 gives only as a product of features (the gate vector and the passage direction)
 that the network must learn to multiply. Version 1's features are the first of version 2's, so a
 version 1 policy can be fine-tuned with version 2 (zero weights for the new ones); the basic
-layout is the same in both.
+layout is the same in both. Within version 2 the extended features do not begin the racing ones
+(the gate-frame features come last in each), so a version 2 policy keeps its observation.
 """
 
 from __future__ import annotations
