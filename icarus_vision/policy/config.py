@@ -174,6 +174,10 @@ class TrainConfig:
     """Environment steps between evaluations for the best model."""
     eval_episodes: int = 64
     """Episodes per evaluation (random tracks at the current curriculum stage)."""
+    eval_same_layouts: bool = False
+    """Every evaluation flies the same layouts (seed + 10,000), so the best model is chosen by the
+    policy and not by the draw; False: each evaluation draws its own (seed + 10,000 + steps), as
+    every run before 2026-12-05 did (its evaluations of one policy swung by 10 points)."""
 
     def __post_init__(self) -> None:
         validate_train_config(self)

@@ -284,10 +284,10 @@ def train_policy(
             if self.num_timesteps >= self.next_eval:
                 self.next_eval += cfg.eval_every
                 n = curriculum.num_gates
+                eval_seed = seed + 10_000 + (0 if cfg.eval_same_layouts else self.num_timesteps)
                 ev = evaluate_model(
-                    model, cfg, n, cfg.eval_episodes, seed + 10_000 + self.num_timesteps,
-                    curriculum.difficulty,
-                )  # fmt: skip
+                    model, cfg, n, cfg.eval_episodes, eval_seed, curriculum.difficulty
+                )
                 self.logger.record("eval/success_rate", ev.success)
                 self.logger.record("eval/score", ev.score)
                 if ev.lap_per_gate_s is not None:

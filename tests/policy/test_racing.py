@@ -278,6 +278,28 @@ def test_specialist_fine_tune_smoke(tmp_path):
         config_from_dict({"init_critic_steps": -1})
 
 
+@pytest.mark.parametrize("same", [False, True])
+def test_evaluations_fly_the_same_layouts_when_asked(tmp_path, monkeypatch, same):
+    import icarus_vision.policy.train as train_mod
+
+    seeds = []
+    real = train_mod.evaluate_model
+
+    def spy(model, cfg, num_gates, episodes, seed, difficulty=None):
+        seeds.append(seed)
+        return real(model, cfg, num_gates, episodes, seed, difficulty)
+
+    monkeypatch.setattr(train_mod, "evaluate_model", spy)
+    cfg = replace(
+        SPECIALIST, track="single-gate", eval_same_layouts=same, init_critic_steps=0,
+        ppo=PPOConfig(num_envs=16, n_steps=32, batch_size=256, n_epochs=1, net_arch=(64, 64)),
+        checkpoint_every=10**9, eval_every=512, eval_episodes=4,
+    )  # fmt: skip
+    train_policy(cfg, tmp_path / "run", seed=3, timesteps=2048, verbose=0)
+    assert len(seeds) >= 3
+    assert (len(set(seeds)) == 1) == same and seeds[0] == 10_003 + (0 if same else 512)
+
+
 def test_time_cost_adds_to_the_presets_time_weight():
     assert SPECIALIST.time_cost == 2.0 and SPECIALIST.reward_config().time == -2.0
     assert replace(SPECIALIST, time_cost=0.0).reward_config() == RACING_LINE_REWARD
