@@ -30,9 +30,9 @@ from icarus_vision.estimator.fusion import match_detections, solve_detections
 from icarus_vision.estimator.odometry import OdometryReading, check_odometry
 from icarus_vision.estimator.pnp import GateMeasurement, wrap_axis
 from icarus_vision.gate_detect.base import GateDetection
-from icarus_vision.render.camera import Camera
+from icarus_vision.render.camera import Camera, project_points
 from icarus_vision.sim.dynamics import quat_to_rot
-from icarus_vision.sim.track import SAME_GATE_TOL, Track
+from icarus_vision.sim.track import SAME_GATE_TOL, Gate, Track
 
 
 class GateEstimator:
@@ -284,15 +284,9 @@ class GateEstimator:
     def _in_view(self, track: GateTrack, r_wc: np.ndarray, t_wc: np.ndarray) -> bool:
         """Whether the whole opening of ``track``'s estimate lies in front of the camera and
         inside the image: where vision would see the gate if the map were right."""
-        c, s, h = math.cos(track.mean[3]), math.sin(track.mean[3]), track.size / 2.0
-        corners = np.array([[-s * y, c * y, z] for y in (-h, h) for z in (-h, h)]) + track.pos
-        cam = (corners - t_wc) @ r_wc
-        if (cam[:, 2] < 0.1).any():
-            return False
-        uv = cam @ self._k.T
-        uv = uv[:, :2] / uv[:, 2:]
-        w, hgt = self._image_size
-        return bool((uv >= 0).all() and (uv[:, 0] < w).all() and (uv[:, 1] < hgt).all())
+        gate = Gate(tuple(track.pos), math.degrees(track.mean[3]), track.size)
+        pixels, _ = project_points(self._k, (gate.corners() - t_wc) @ r_wc)
+        return bool(self.camera.in_image(self.camera.distort(pixels)).all())
 
     def _unmatched(self, m: GateMeasurement, t: float, r_wc: np.ndarray, t_wc: np.ndarray) -> None:
         """A detection no gate explains: an outlier, a wrong prior, or (map-free) a new gate."""
