@@ -22,6 +22,7 @@ from icarus_vision.policy.features import (
     FEATURES_V1,
     FEATURES_V2,
     FEATURES_VERSION,
+    FEATURES_VERSIONS,
     feature_dim,
     obs_to_features,
 )
@@ -153,7 +154,7 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         raise ValueError(
             f"{js}: action convention {desc.get('action')!r}/{desc.get('action_dim')} does not match ctbr/4"
         )
-    if desc.get("features") not in (FEATURES_V1, FEATURES_V2) or desc.get("gate_frame") != "world":
+    if desc.get("features") not in FEATURES_VERSIONS.values() or desc.get("gate_frame") != "world":
         raise ValueError(
             f"{js}: feature transform {desc.get('features')!r} (gate frame {desc.get('gate_frame')!r}) does not match {FEATURES_V1} or {FEATURES_V2} (world)"
         )

@@ -51,7 +51,7 @@ def feature_dim(obs_dim: int, version: str = FEATURES_V1) -> int:
 
 
 def _check_version(version: str) -> None:
-    if version not in (FEATURES_V1, FEATURES_V2):
+    if version not in FEATURES_VERSIONS.values():
         raise ValueError(
             f"unknown feature transform {version!r} (use {FEATURES_V1} or {FEATURES_V2})"
         )

@@ -79,12 +79,17 @@ def run_features(cfg: TrainConfig) -> str:
 
 
 def make_train_env(
-    cfg: TrainConfig, num_envs: int, num_gates: int, seed: int, difficulty: float | None = None
+    cfg: TrainConfig,
+    num_envs: int,
+    num_gates: int,
+    seed: int,
+    difficulty: float | None = None,
+    features: str | None = None,
 ):
     """The training VecEnv stack: batched drones -> perception noise -> policy features.
 
     Random tracks of ``num_gates`` gates at layout ``difficulty`` (None: classic layouts), or the
-    config's fixed ``track``.
+    config's fixed ``track``; ``features``: the transform (None: ``run_features(cfg)``).
     """
     track = None if cfg.track is None else resolve_track(cfg.track)
     env_cfg = EnvConfig(
@@ -106,7 +111,7 @@ def make_train_env(
             venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m,
             map_yaw_error_deg=cfg.perception.map_yaw_error_deg,
         )  # fmt: skip
-    return FeatureVecEnv(venv, run_features(cfg))
+    return FeatureVecEnv(venv, features or run_features(cfg))
 
 
 LAP_WEIGHT = 0.1
@@ -135,9 +140,10 @@ def evaluate_model(
     episodes: int,
     seed: int,
     difficulty: float | None = None,
+    features: str | None = None,
 ) -> Evaluation:
     """The deterministic policy over ``episodes`` tracks (one per drone)."""
-    env = make_train_env(cfg, episodes, num_gates, seed, difficulty)
+    env = make_train_env(cfg, episodes, num_gates, seed, difficulty, features)
     obs = env.reset()
     result: list[bool | None] = [None] * episodes
     per_gate: list[float] = []
@@ -228,7 +234,9 @@ def train_policy(
             f"{ckpt_dir / 'last_state.json'}: curriculum stage {stage} is out of range for this config"
         )
     features = run_features(cfg)
-    env = make_train_env(cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage))
+    env = make_train_env(
+        cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage), features
+    )
     if resume:
         try:
             model = PPO.load(ckpt_dir / "last.zip", env=env, device="cpu")
@@ -286,7 +294,7 @@ def train_policy(
                 n = curriculum.num_gates
                 eval_seed = seed + 10_000 + (0 if cfg.eval_same_layouts else self.num_timesteps)
                 ev = evaluate_model(
-                    model, cfg, n, cfg.eval_episodes, eval_seed, curriculum.difficulty
+                    model, cfg, n, cfg.eval_episodes, eval_seed, curriculum.difficulty, features
                 )
                 self.logger.record("eval/success_rate", ev.success)
                 self.logger.record("eval/score", ev.score)

@@ -285,9 +285,9 @@ def test_evaluations_fly_the_same_layouts_when_asked(tmp_path, monkeypatch, same
     seeds = []
     real = train_mod.evaluate_model
 
-    def spy(model, cfg, num_gates, episodes, seed, difficulty=None):
+    def spy(model, cfg, num_gates, episodes, seed, *rest):
         seeds.append(seed)
-        return real(model, cfg, num_gates, episodes, seed, difficulty)
+        return real(model, cfg, num_gates, episodes, seed, *rest)
 
     monkeypatch.setattr(train_mod, "evaluate_model", spy)
     cfg = replace(
