@@ -55,7 +55,7 @@ class CurriculumCallback(BaseCallback):
 
     def record(self, info: dict) -> bool:
         """Count one finished episode; returns True when this promoted the curriculum."""
-        if info.get("gates_total") != self.num_gates:
+        if info.get("gates_total") != self.num_gates or info.get("replayed"):
             return False
         if self.cfg.difficulty is not None and info.get("difficulty") != self.difficulty:
             return False

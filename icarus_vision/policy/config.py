@@ -78,6 +78,10 @@ class CurriculumConfig:
     """Episodes in the success window."""
     min_episodes: int = 20
     """Episodes at a stage before a promotion is considered."""
+    layout_replay: float = 0.0
+    """Random tracks: the chance that a training episode re-flies a layout the policy failed on
+    (prioritised level replay; ``EnvConfig.layout_replay``). Replayed episodes do not count
+    towards promotion, and evaluations always draw new layouts. 0: every layout new."""
 
 
 @dataclass(frozen=True)
@@ -226,6 +230,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("curriculum.promote_success", 0 < c.curriculum.promote_success <= 1),
         ("curriculum.window", c.curriculum.window >= 1),
         ("curriculum.min_episodes", 1 <= c.curriculum.min_episodes),
+        ("curriculum.layout_replay", 0 <= c.curriculum.layout_replay < 1),
         (
             "curriculum.difficulty",
             c.curriculum.difficulty is None

@@ -85,11 +85,13 @@ def make_train_env(
     seed: int,
     difficulty: float | None = None,
     features: str | None = None,
+    layout_replay: float = 0.0,
 ):
     """The training VecEnv stack: batched drones -> perception noise -> policy features.
 
     Random tracks of ``num_gates`` gates at layout ``difficulty`` (None: classic layouts), or the
-    config's fixed ``track``; ``features``: the transform (None: ``run_features(cfg)``).
+    config's fixed ``track``; ``features``: the transform (None: ``run_features(cfg)``);
+    ``layout_replay``: the chance an episode re-flies a failed layout (training only).
     """
     track = None if cfg.track is None else resolve_track(cfg.track)
     env_cfg = EnvConfig(
@@ -97,6 +99,7 @@ def make_train_env(
         random_tracks=track is None,
         num_gates=num_gates,
         layout_difficulty=difficulty if track is None else None,
+        layout_replay=layout_replay if track is None else 0.0,
         randomization=cfg.randomization,
         reward=cfg.reward_config(),
         observation=cfg.observation,
@@ -235,8 +238,9 @@ def train_policy(
         )
     features = run_features(cfg)
     env = make_train_env(
-        cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage), features
-    )
+        cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage), features,
+        stages.layout_replay,
+    )  # fmt: skip
     if resume:
         try:
             model = PPO.load(ckpt_dir / "last.zip", env=env, device="cpu")

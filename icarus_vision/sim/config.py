@@ -103,6 +103,10 @@ class EnvConfig:
     layout_difficulty: float | None = None
     """Random tracks only: None draws the classic ``random_track`` layouts; a value in [0, 1]
     draws ``race_track`` layouts of that difficulty (1: the full ranges and motifs)."""
+    layout_replay: float = 0.0
+    """Random tracks only: the chance that an episode re-flies a layout some drone of the batch
+    failed on (crash or time-out) instead of drawing a new one (the gates jittered afresh); each
+    failed layout is flown again once, and again after each further failure. 0: every layout new."""
     quad: QuadParams = field(default_factory=QuadParams)
     """The quadrotor."""
     ctrl_hz: float = 50.0
@@ -141,6 +145,8 @@ class EnvConfig:
             raise ValueError(
                 f"layout_difficulty must be in [0, 1] or None, got {self.layout_difficulty}"
             )
+        if not 0.0 <= self.layout_replay < 1.0:
+            raise ValueError(f"layout_replay must be in [0, 1), got {self.layout_replay}")
         if self.num_gates is not None and self.num_gates < 1:
             raise ValueError(f"num_gates must be >= 1, got {self.num_gates}")
 

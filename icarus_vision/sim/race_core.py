@@ -36,6 +36,7 @@ from icarus_vision.sim.track import Track
 
 TAKEOFF_CLEARANCE = 0.1  # m above the ground (sphere bottom) that counts as airborne
 RANDOM_TRACK_GATES = 10
+REPLAY_CAPACITY = 1024  # failed layouts kept for ``layout_replay``, newest kept
 
 
 class RaceCore:
@@ -53,6 +54,9 @@ class RaceCore:
         self.difficulty = cfg.layout_difficulty
         self.rngs = [np.random.default_rng() for _ in range(n)]
         self.tracks: list[Track] = [None] * n  # type: ignore[list-item]
+        self.layouts: list[Track] = [None] * n  # type: ignore[list-item]  # before the jitter
+        self.replay: list[Track] = []  # layouts failed on, for ``cfg.layout_replay``
+        self.replayed = np.zeros(n, dtype=bool)
         self.params = QuadBatchParams.from_quad(cfg.quad, n)
         self._alloc(self._capacity())
         self.target = np.zeros(n, dtype=np.int64)
@@ -102,6 +106,8 @@ class RaceCore:
             raise ValueError(f"num gates must be >= 1, got {n_gates}")
         if self.base_track is not None and n_gates > len(self.base_track.gates):
             n_gates = len(self.base_track.gates)
+        if int(n_gates) != self.num_gates:
+            self.replay.clear()  # the failed layouts have the old gate count
         self.num_gates = int(n_gates)
         need = n_gates if self.base_track is None else n_gates * self.base_track.laps
         if need > self.cap:
@@ -121,9 +127,19 @@ class RaceCore:
         """
         if difficulty is not None and not 0.0 <= difficulty <= 1.0:
             raise ValueError(f"layout difficulty must be in [0, 1] or None, got {difficulty}")
+        if difficulty != self.difficulty:
+            self.replay.clear()
         self.difficulty = difficulty
 
-    def _episode_track(self, rng: np.random.Generator) -> Track:
+    def _replay_layout(self, rng: np.random.Generator) -> Track | None:
+        """A failed layout to fly again, or None (drawn only with ``layout_replay`` on)."""
+        if self.cfg.layout_replay <= 0 or self.base_track is not None:
+            return None
+        if not self.replay or rng.random() >= self.cfg.layout_replay:
+            return None
+        return self.replay.pop(int(rng.integers(len(self.replay))))
+
+    def _layout(self, rng: np.random.Generator) -> Track:
         if self.base_track is None:
             n_gates = self.num_gates or RANDOM_TRACK_GATES
             if self.difficulty is None:
@@ -140,6 +156,9 @@ class RaceCore:
                     bounds_min=None,
                     bounds_max=None,
                 )
+        return track
+
+    def _jitter(self, track: Track, rng: np.random.Generator) -> Track:
         r = self.cfg.randomization
         if r.enabled and (r.gate_pos_jitter_m > 0 or r.gate_yaw_jitter_deg > 0):
             track = jitter_track(track, rng, r.gate_pos_jitter_m, r.gate_yaw_jitter_deg)
@@ -158,8 +177,11 @@ class RaceCore:
         start_yaw = np.zeros(len(idx))
         for k, i in enumerate(idx):
             rng = self.rngs[i]
-            track = self._episode_track(rng)
-            self.tracks[i] = track
+            layout = self._replay_layout(rng)
+            self.replayed[i] = layout is not None
+            layout = self._layout(rng) if layout is None else layout
+            self.layouts[i] = layout
+            track = self.tracks[i] = self._jitter(layout, rng)
             random_layout = self.base_track is None and self.difficulty is not None
             self.ep_difficulty[i] = self.difficulty if random_layout else np.nan
             passages = track.passages
@@ -319,6 +341,10 @@ class RaceCore:
         all_passed = self.target >= self.n_pass
         terminated = crashed | all_passed
         truncated = (self.t >= self.max_t - 1e-9) & ~terminated
+        if self.cfg.layout_replay > 0 and self.base_track is None:
+            for i in np.flatnonzero((terminated | truncated) & ~all_passed):
+                self.replay.append(self.layouts[i])
+            del self.replay[:-REPLAY_CAPACITY]
         self.ep_return += reward
         for k, v in terms.items():
             self.ep_terms.setdefault(k, np.zeros(self.n))[:] += v
@@ -358,6 +384,7 @@ class RaceCore:
             "lap_times": list(self.lap_times[i]),
             "time": float(self.t[i]),
             "difficulty": None if np.isnan(self.ep_difficulty[i]) else float(self.ep_difficulty[i]),
+            "replayed": bool(self.replayed[i]),
             "reward_terms": {k: float(v[i]) for k, v in terms.items()},
             "episode_reward_terms": {k: float(v[i]) for k, v in self.ep_terms.items()},
         }
