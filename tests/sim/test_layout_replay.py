@@ -68,7 +68,9 @@ def test_finished_layouts_and_fixed_tracks_are_never_replayed():
     assert not env.core.replay
     run_episodes(env, 1)  # a timed-out one does
     assert len(env.core.replay) == 1 or env.core.replayed[0]  # kept, or already drawn again
-    fixed = BatchedRacingVecEnv(1, EnvConfig(track="grand-prix", max_episode_s=0.1, layout_replay=0.5))
+    fixed = BatchedRacingVecEnv(
+        1, EnvConfig(track="grand-prix", max_episode_s=0.1, layout_replay=0.5)
+    )
     fixed.seed(0)
     fixed.reset()
     assert not any(e["replayed"] for e in run_episodes(fixed, 10))
