@@ -135,7 +135,7 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
         (
             "[[datasets]]\nname = 'a'\nrecipe = 'gates-v1'\nimages = 4\n[corner]\ndata = ['a']\n"
             "[refiner]\ndata = ['a']\n[zoom]\nkeep = 'shipped'\n",
-            "kept stages come first",
+            "a kept zoom stage needs a kept refiner",
         ),
     ],
 )
@@ -187,3 +187,45 @@ keep = "shipped"
         SHIPPED / "model.safetensors"
     ).read_bytes()
     assert make_detector(f"cnn:{out / 'detector'}").detect(gate_image())
+
+
+def test_a_build_keeps_the_shipped_corner_network_and_rescorer_around_trained_stages(tmp_path):
+    """The later stages trained on the shipped corner network, the shipped rescorer put on them."""
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
+
+    recipe = write_recipe(tmp_path / "tiny.toml")
+    recipe.write_text(
+        recipe.read_text().replace("width = 160\nheight = 120", "width = 320\nheight = 240")
+    )
+    config = tmp_path / "build.toml"
+    config.write_text(f"""
+[[datasets]]
+name = "a"
+recipe = "{recipe}"
+images = 8
+[corner]
+keep = "shipped"
+[refiner]
+data = ["a"]
+init = "shipped"
+train = {{ batch_size = 8, lr = 1e-5, tune = false }}
+[zoom]
+data = ["a"]
+train = {{ batch_size = 8 }}
+[rescorer]
+keep = "shipped"
+""")
+    out = tmp_path / "build"
+    r = runner.invoke(
+        app, ["build-detector", "--config", str(config), "--out", str(out), "--workers", "1"]
+    )
+    assert r.exit_code == 0, r.output
+    built, shipped = out / "detector", SHIPPED
+    for name in ("model.safetensors", "rescore.safetensors"):
+        assert (built / name).read_bytes() == (shipped / name).read_bytes()
+    for name in ("refiner.safetensors", "zoom.safetensors"):
+        assert (built / name).read_bytes() != (shipped / name).read_bytes()
+    meta = json.loads((built / "detector.json").read_text())
+    assert meta["rescore"] == json.loads((shipped / "detector.json").read_text())["rescore"]
+    assert meta["refine_training"]["init"] == str(shipped)
+    assert make_detector(f"cnn:{built}").detect(gate_image())

@@ -24,7 +24,9 @@ stages to train, each stage starting from the checkpoint the one before it wrote
     [rescorer]                        # train-rescorer; splits = ["train"]
     [quantize]                        # int8 copies: data, images, split
     # keep = "shipped" (or a checkpoint) in [refiner], [zoom] and [rescorer]: those stages of that
-    # detector on the new corner network, untrained (its input size and candidate decoding)
+    # detector on the new corner network, untrained (its input size and candidate decoding); a
+    # kept rescorer may follow trained stages (it is put on the finished ones). keep in [corner]:
+    # that detector's corner network, untrained, and the later stages trained on it
     [evaluate]                        # eval-detector on data's test split: OUT/eval.json and
                                       # OUT/detector/error_model.json
 
@@ -138,25 +140,23 @@ def load_build(path: str | Path) -> BuildSpec:
                     raise ValueError(f"{src}: [{stage}].{key}: {ref!r}: a share must be > 0")
         if spec.epochs < 1:
             raise ValueError(f"{src}: [{stage}].epochs: must be >= 1")
-        if spec.keep and stage not in ("refiner", "zoom", "rescorer"):
-            raise ValueError(f"{src}: [{stage}].keep: only a refiner, zoom or rescorer is kept")
-        if stage != "corner" and not spec.data and not spec.keep:
+        if spec.keep and stage not in ("corner", "refiner", "zoom", "rescorer"):
+            raise ValueError(
+                f"{src}: [{stage}].keep: only a corner network, refiner, zoom or rescorer is kept"
+            )
+        if not spec.data and not spec.keep and stage != "quantize" and stage != "evaluate":
             raise ValueError(f"{src}: [{stage}].data: needs at least one dataset")
         stages[stage] = spec
     for later, needs in (("zoom", "refiner"), ("rescorer", "zoom")):
         if later in stages and needs not in stages:
             raise ValueError(f"{src}: [{later}] needs a [{needs}] stage before it")
-    kept = [k for k in ("refiner", "zoom", "rescorer") if k in stages and stages[k].keep]
-    if kept and (
-        len({stages[k].keep for k in kept}) != 1
-        or kept != ["refiner", "zoom", "rescorer"][: len(kept)]
-    ):
+    kept = [k for k in ("refiner", "zoom") if k in stages and stages[k].keep]
+    sources = {stages[k].keep for k in stages if stages[k].keep}
+    if len(sources) > 1 or kept != ["refiner", "zoom"][: len(kept)]:
         raise ValueError(
-            f"{src}: keep: the kept stages come first (refiner, then zoom, then rescorer), "
-            "from one detector"
+            f"{src}: keep: the kept stages come from one detector, and a kept zoom stage needs "
+            "a kept refiner"
         )
-    if not stages["corner"].data:
-        raise ValueError(f"{src}: [corner].data: needs at least one dataset")
     return BuildSpec(str(name), tuple(sets), stages, src)
 
 
@@ -214,11 +214,17 @@ def build_detector(
 
     st = spec.stages
     current = out / "corner" / "best"
-    step("corner", lambda: _corner(st["corner"], data, out / "corner", epochs(st["corner"]), seed,
-                                   resumes(out / "corner"), log, progress))  # fmt: skip
-    kept = [k for k in ("refiner", "zoom", "rescorer") if k in st and st[k].keep]
+    source = next((_init(v.keep) for v in st.values() if v.keep), None)  # one (load_build)
+    if st["corner"].keep:
+        step("corner", lambda: corner_network(source, current))
+    else:
+        step("corner", lambda: _corner(st["corner"], data, out / "corner", epochs(st["corner"]),
+                                       seed, resumes(out / "corner"), log, progress))  # fmt: skip
+    kept = [k for k in ("refiner", "zoom") if k in st and st[k].keep]
+    trained = [k for k in ("refiner", "zoom") if k in st and not st[k].keep]
+    if "rescorer" in st and st["rescorer"].keep and not trained:
+        kept.append("rescorer")  # on the kept stages: grafted with them
     if kept:  # the later stages of another detector on this corner network (no training)
-        source = _init(st[kept[0]].keep)  # one detector for all (load_build checks)
         step("kept stages", lambda: graft(current, source, out / "kept", kept))
         current = out / "kept"
         st = {k: v for k, v in st.items() if k not in kept}
@@ -232,7 +238,10 @@ def build_detector(
         step("zoom", lambda: _zoom(s, data, current, out / "zoom", epochs(s), seed,
                                    resumes(out / "zoom"), log, progress))  # fmt: skip
         current = out / "zoom" / "best"
-    if "rescorer" in st:
+    if "rescorer" in st and st["rescorer"].keep:  # on the networks trained above
+        step("kept rescorer", lambda: graft(current, source, out / "rescorer", ["rescorer"]))
+        current = out / "rescorer"
+    elif "rescorer" in st:
         s = st["rescorer"]
         step("rescorer", lambda: _rescorer(s, data, current, out / "rescorer", epochs(s), seed,
                                            log, progress))  # fmt: skip
@@ -261,10 +270,22 @@ def build_detector(
     return final
 
 
+def corner_network(source: Path, out: Path) -> Path:
+    """The checkpoint ``source``'s corner network alone (no later stage), written to ``out``."""
+    from icarus_vision.gate_detect.cnn.checkpoint import load_checkpoint, save_checkpoint
+
+    model, decode, meta = load_checkpoint(source)
+    shutil.rmtree(out, ignore_errors=True)
+    return save_checkpoint(
+        out, model, decode, {**meta.get("training", {}), "kept_from": str(source)}
+    )
+
+
 def graft(corner: Path, source: Path, out: Path, stages: list[str]) -> Path:
-    """``source``'s later ``stages`` (refiner, zoom, rescorer) on the corner network of the
-    checkpoint ``corner``, written to ``out``: the corner network reads frames at ``source``'s
-    input size with ``source``'s candidate decoding (what its refiner was tuned with)."""
+    """``source``'s later ``stages`` (refiner, zoom, rescorer) on the checkpoint ``corner``,
+    written to ``out``: its corner network reads frames at ``source``'s input size with
+    ``source``'s candidate decoding (what its refiner was tuned with); its own refiner and zoom
+    stage stay where ``source``'s are not put in their place."""
     from icarus_vision.gate_detect.cnn.checkpoint import (
         load_checkpoint,
         load_refiner,
@@ -277,11 +298,17 @@ def graft(corner: Path, source: Path, out: Path, stages: list[str]) -> Path:
     model, _, meta = load_checkpoint(corner)
     shipped, decode, smeta = load_checkpoint(source)
     model.cfg = replace(model.cfg, input_size=shipped.cfg.input_size)
-    refiner = load_refiner(source, smeta) if "refiner" in stages else None
-    zoom = load_zoom(source, smeta) if "zoom" in stages else None
+    own = {"refiner": (corner, meta), "zoom": (corner, meta)}
+    own.update({k: (source, smeta) for k in stages})
+    refiner, zoom = load_refiner(*own["refiner"]), load_zoom(*own["zoom"])
+    info = (
+        {**meta.get("training", {}), "later_stages": str(source)}
+        if stages
+        else meta.get("training", {})
+    )
     shutil.rmtree(out, ignore_errors=True)
-    save_checkpoint(out, model, decode, {**meta.get("training", {}), "later_stages": str(source)},
-                    refiner, smeta.get("refine_training"), zoom, smeta.get("zoom_training"))  # fmt: skip
+    save_checkpoint(out, model, decode, info, refiner, own["refiner"][1].get("refine_training"),
+                    zoom, own["zoom"][1].get("zoom_training"))  # fmt: skip
     if "rescorer" in stages:
         save_rescorer(out, load_rescorer(source, smeta), smeta.get("rescore_training", {}))
     return out
