@@ -8,6 +8,7 @@ Output folder layout (``out``):
     best.safetensors/.json      exported policy with the best evaluation (stage, then success
                                 less LAP_WEIGHT × median lap per gate)
     policy.safetensors/.json    exported final policy
+    evaluated/STEPS.*           every evaluated policy, exported, its evaluation in its meta
     metrics.json                wall-clock curve: timesteps, stage, success rate, mean return
 
 Ctrl-C saves ``checkpoints/last.zip`` and re-raises; ``resume=True`` continues from it with the
@@ -304,16 +305,20 @@ def train_policy(
                 self.logger.record("eval/score", ev.score)
                 if ev.lap_per_gate_s is not None:
                     self.logger.record("eval/lap_per_gate_s", ev.lap_per_gate_s)
+                meta = {
+                    "name": f"evaluated-{self.num_timesteps}",
+                    "timesteps": int(self.num_timesteps),
+                    "num_gates": n,
+                    "difficulty": curriculum.difficulty,
+                    "eval_success": ev.success,
+                    "eval_lap_per_gate_s": ev.lap_per_gate_s,
+                }
+                evaluated = out / "evaluated" / f"{self.num_timesteps:09d}"
+                evaluated.parent.mkdir(exist_ok=True)
+                export_sb3_policy(model, evaluated, cfg.observation, meta, features)
                 if (curriculum.stage, ev.score) > tuple(best):
                     best[:] = [curriculum.stage, ev.score]
-                    meta = {
-                        "name": "best",
-                        "timesteps": int(self.num_timesteps),
-                        "num_gates": n,
-                        "difficulty": curriculum.difficulty,
-                        "eval_success": ev.success,
-                        "eval_lap_per_gate_s": ev.lap_per_gate_s,
-                    }
+                    meta = {**meta, "name": "best"}
                     export_sb3_policy(model, out / "best", cfg.observation, meta, features)
             if self.num_timesteps >= self.next_ckpt:
                 self.next_ckpt += cfg.checkpoint_every

@@ -189,3 +189,19 @@ def test_config_values_of_the_wrong_type_or_range_are_refused(table, match):
 
     with pytest.raises(ValueError, match=match):
         config_from_dict(table, "x.toml")
+
+
+def test_every_evaluated_policy_is_exported_with_its_evaluation(tmp_path):
+    out = tmp_path / "run"
+    train_policy(replace(TINY, eval_every=4096, eval_episodes=4), out, seed=2, timesteps=8192,
+                 verbose=0)  # fmt: skip
+    evaluated = sorted((out / "evaluated").glob("*.json"))
+    assert [p.stem for p in evaluated] == ["000004096", "000008192"]
+    metas = [json.loads(p.read_text())["meta"] for p in evaluated]
+    assert [m["timesteps"] for m in metas] == [4096, 8192]
+    assert all(0.0 <= m["eval_success"] <= 1.0 for m in metas)
+    best = json.loads((out / "best.json").read_text())["meta"]
+    assert best["name"] == "best" and best["timesteps"] in (4096, 8192)
+    chosen = out / "evaluated" / f"{best['timesteps']:09d}.safetensors"
+    assert chosen.read_bytes() == (out / "best.safetensors").read_bytes()
+    assert load_policy(chosen).obs_dim == load_policy(out / "best").obs_dim
