@@ -68,6 +68,7 @@ def user_errors(fn):
 
 
 # Each command lives in its own module under icarus_vision/commands/ and registers itself on `app`.
+from icarus_vision.commands import average_policy as _average_policy  # noqa: E402,F401
 from icarus_vision.commands import build_detector as _build_detector  # noqa: E402,F401
 from icarus_vision.commands import eval_detector as _eval_detector  # noqa: E402,F401
 from icarus_vision.commands import eval_estimator as _eval_estimator  # noqa: E402,F401

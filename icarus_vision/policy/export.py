@@ -188,6 +188,45 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
     return ExportedPolicy(weights, desc, st)
 
 
+def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None = None) -> Path:
+    """Write the mean of exported policies' weights as ``out`` (stochastic weight averaging).
+
+    Policies taken from one training run's plateau (``OUT/evaluated/``) share their start, so
+    their average is a policy too, and often a steadier one than any of them.
+
+    Args:
+        paths: exported policies of one observation, feature transform and architecture.
+        out: the averaged policy's path (``.safetensors`` and ``.json`` beside each other).
+        meta: the averaged policy's meta (its ``averaged`` entry lists ``paths``).
+
+    Raises:
+        ValueError: no policy, or policies that differ in what they read or their layers.
+    """
+    if not paths:
+        raise ValueError("average of no policies: give at least one")
+    policies = [load_policy(p) for p in paths]
+    keys = ("observation", "obs_dim", "features", "hidden", "activation")
+    first = policies[0]
+    for pol in policies[1:]:
+        differ = [k for k in keys if pol.desc.get(k) != first.desc.get(k)]
+        if differ:
+            raise ValueError(
+                f"{pol.path}: its {', '.join(differ)} differ from {first.path}'s; only policies "
+                "of one observation, feature transform and architecture are averaged"
+            )
+    tensors = {}
+    for i in range(len(first.weights)):
+        for j, name in enumerate(("w", "b")):
+            stack = np.stack([pol.weights[i][j] for pol in policies]).astype(np.float32)
+            tensors[f"{name}{i}"] = stack.mean(axis=0, dtype=np.float32)
+    desc = {k: v for k, v in first.desc.items() if k != "meta"}
+    desc["meta"] = {**(meta or {}), "averaged": [str(pol.path.with_suffix("")) for pol in policies]}
+    st, js = _paths(out)
+    atomic_write_bytes(st, save_safetensors(tensors))
+    atomic_write_json(js, desc)
+    return st
+
+
 def load_init_actor(
     model, spec: str, observation: str, features: str = FEATURES_VERSION
 ) -> ExportedPolicy:
