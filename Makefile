@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: race test lint format bench docs docs-media train-generalist train-specialists clean
+.PHONY: race test lint format bench docs docs-media train-generalist train-specialists build-detector clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -54,8 +54,17 @@ train-generalist: $(STAMP)
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-vision-more.toml --seed 0 --out runs/policy-racing-vision-more --timesteps 20000000
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-gateframe.toml --seed 0 --out runs/policy-racing-gateframe --timesteps 20000000
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-gateframe-more.toml --seed 0 --out runs/policy-racing-gateframe-more --timesteps 20000000
-	cp runs/policy-racing-gateframe-more/best.json icarus_vision/models/policy/default.json
-	cp runs/policy-racing-gateframe-more/best.safetensors icarus_vision/models/policy/default.safetensors
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-replay.toml --seed 0 --out runs/policy-racing-replay --timesteps 20000000
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-replay-more.toml --seed 0 --out runs/policy-racing-replay-more --timesteps 20000000
+	$(BIN)/icarus-vision average-policy runs/policy-racing-replay-more --last 5
+	cp runs/policy-racing-replay-more/average.json icarus_vision/models/policy/default.json
+	cp runs/policy-racing-replay-more/average.safetensors icarus_vision/models/policy/default.safetensors
+
+# The shipped detector (models/detector/) from nothing, in its two parts (docs/detection.md).
+build-detector: $(STAMP)
+	$(BIN)/icarus-vision build-detector --config configs/detector-build.toml --out runs/detector-build
+	$(BIN)/icarus-vision build-detector --config configs/detector-v5-build.toml --out runs/detector-v5
+	cp runs/detector-v5/detector/* icarus_vision/models/detector/
 
 # The shipped specialists (models/policy/<track>-specialist.*, from each run's policy.*), side by side.
 train-specialists: $(STAMP)
