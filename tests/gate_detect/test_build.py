@@ -4,6 +4,7 @@ after an interruption without redoing finished steps; bad build files are one-li
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -149,78 +150,72 @@ def test_bad_build_files_are_one_line_errors(tmp_path, text, needle):
     assert r.exit_code == 1 and len(lines) == 1 and needle in lines[0], r.output
 
 
-def test_a_build_fine_tunes_the_corner_network_and_keeps_the_shipped_later_stages(tmp_path):
-    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
-
+def build_on_tiny_renders(tmp_path, stages: str) -> Path:
+    """Run build-detector on 8 tiny 320x240 renders (dataset "a") with ``stages``; its detector."""
     recipe = write_recipe(tmp_path / "tiny.toml")
     recipe.write_text(
         recipe.read_text().replace("width = 160\nheight = 120", "width = 320\nheight = 240")
     )
     config = tmp_path / "build.toml"
-    config.write_text(f"""
-[[datasets]]
-name = "a"
-recipe = "{recipe}"
-images = 8
+    config.write_text(f'[[datasets]]\nname = "a"\nrecipe = "{recipe}"\nimages = 8\n{stages}')
+    out = tmp_path / "build"
+    r = runner.invoke(
+        app, ["build-detector", "--config", str(config), "--out", str(out), "--workers", "1"]
+    )
+    assert r.exit_code == 0, r.output
+    return out / "detector"
+
+
+def test_a_build_fine_tunes_the_corner_network_and_keeps_the_shipped_later_stages(tmp_path):
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
+
+    built = build_on_tiny_renders(
+        tmp_path,
+        """
 [corner]
 data = ["a"]
 init = "shipped"
-train = {{ batch_size = 8, bf16 = false, lr = 1e-5, tune_decode = false }}
+train = { batch_size = 8, bf16 = false, lr = 1e-5, tune_decode = false }
 [refiner]
 keep = "shipped"
 [zoom]
 keep = "shipped"
 [rescorer]
 keep = "shipped"
-""")
-    out = tmp_path / "build"
-    r = runner.invoke(
-        app, ["build-detector", "--config", str(config), "--out", str(out), "--workers", "1"]
+""",
     )
-    assert r.exit_code == 0, r.output
-    meta = json.loads((out / "detector" / "detector.json").read_text())
+    meta = json.loads((built / "detector.json").read_text())
     shipped = json.loads((SHIPPED / "detector.json").read_text())
     for key in ("refine", "zoom", "rescore", "decode"):
         assert meta[key] == shipped[key]
     assert meta["model"]["input_size"] == shipped["model"]["input_size"]
-    assert (out / "detector" / "model.safetensors").read_bytes() != (
+    assert (built / "model.safetensors").read_bytes() != (
         SHIPPED / "model.safetensors"
     ).read_bytes()
-    assert make_detector(f"cnn:{out / 'detector'}").detect(gate_image())
+    assert make_detector(f"cnn:{built}").detect(gate_image())
 
 
 def test_a_build_keeps_the_shipped_corner_network_and_rescorer_around_trained_stages(tmp_path):
     """The later stages trained on the shipped corner network, the shipped rescorer put on them."""
     from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
 
-    recipe = write_recipe(tmp_path / "tiny.toml")
-    recipe.write_text(
-        recipe.read_text().replace("width = 160\nheight = 120", "width = 320\nheight = 240")
-    )
-    config = tmp_path / "build.toml"
-    config.write_text(f"""
-[[datasets]]
-name = "a"
-recipe = "{recipe}"
-images = 8
+    built = build_on_tiny_renders(
+        tmp_path,
+        """
 [corner]
 keep = "shipped"
 [refiner]
 data = ["a"]
 init = "shipped"
-train = {{ batch_size = 8, lr = 1e-5, tune = false }}
+train = { batch_size = 8, lr = 1e-5, tune = false }
 [zoom]
 data = ["a"]
-train = {{ batch_size = 8 }}
+train = { batch_size = 8 }
 [rescorer]
 keep = "shipped"
-""")
-    out = tmp_path / "build"
-    r = runner.invoke(
-        app, ["build-detector", "--config", str(config), "--out", str(out), "--workers", "1"]
+""",
     )
-    assert r.exit_code == 0, r.output
-    built, shipped = out / "detector", SHIPPED
+    shipped = SHIPPED
     for name in ("model.safetensors", "rescore.safetensors"):
         assert (built / name).read_bytes() == (shipped / name).read_bytes()
     for name in ("refiner.safetensors", "zoom.safetensors"):
