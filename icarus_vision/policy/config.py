@@ -112,6 +112,10 @@ class PerceptionNoiseConfig:
     within ± this until the gate is seen (the map's heading; randomisation turns gates up to
     ±10°), and the gate after it is off by ± ``map_error_m`` per axis, as a race reads both from
     the map. 0: both true."""
+    map_share: float = 1.0
+    """The share of the training drones that fly with the map's errors above (the others start
+    each gate from an ordinary detection), so a policy learns the map's errors without giving up
+    the flight on known gates. 1: all of them."""
 
 
 @dataclass(frozen=True)
@@ -266,6 +270,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("perception.miss_per_m", c.perception.miss_per_m >= 0),
         ("perception.map_error_m", c.perception.map_error_m >= 0),
         ("perception.map_yaw_error_deg", 0 <= c.perception.map_yaw_error_deg <= 180),
+        ("perception.map_share", 0 <= c.perception.map_share <= 1),
         ("max_episode_s", c.max_episode_s is None or c.max_episode_s > 0),
     ]
     for name, ok in checks:

@@ -121,14 +121,18 @@ class PerceptionNoise:
         camera: CameraParams | None = None,
         map_error_m: float = 0.0,
         map_yaw_error_deg: float = 0.0,
+        map_share: float = 1.0,
     ) -> None:
         """``camera``: when given, gates outside its field of view are never seen;
         ``map_error_m``: a new target gate's first estimate is the truth moved uniformly within
         ± this per axis (0: an ordinary detection's draw); ``map_yaw_error_deg``: with the
         extended observation, a new target gate's passage direction is turned uniformly within ±
         this until the gate is seen, and the gate after it is off by ± ``map_error_m`` per axis
-        (both from the map, as in a race; drawn from a stream of their own)."""
+        (both from the map, as in a race; drawn from a stream of their own); ``map_share``: the
+        share of the drones (the first of the batch) that fly with the map's errors, the others
+        starting each gate from an ordinary detection (the same draws either way)."""
         self.model = model
+        self.map_drones = np.arange(n) < round(map_share * n)
         self.camera = camera
         self.map_error_m = map_error_m
         self.map_yaw_error = np.radians(map_yaw_error_deg)
@@ -162,7 +166,7 @@ class PerceptionNoise:
         noise = self.rng.normal(size=(len(obs), 3)) * self.model.sigma(dist)[:, None]
         if self.map_error_m > 0:
             prior = self.rng.uniform(-self.map_error_m, self.map_error_m, size=(len(obs), 3))
-            noise = np.where(switched[:, None], prior, noise)
+            noise = np.where((switched & self.map_drones)[:, None], prior, noise)
         self.est = np.where(seen[:, None], true_gate + noise, self.est)
         self.true_prev = true_gate
         out = obs.astype(np.float32, copy=True)
@@ -171,6 +175,7 @@ class PerceptionNoise:
             n = len(obs)
             yaw = self.map_rng.uniform(-self.map_yaw_error, self.map_yaw_error, n)
             after = self.map_rng.uniform(-self.map_error_m, self.map_error_m, (n, 3))
+            yaw, after = yaw * self.map_drones, after * self.map_drones[:, None]
             self.yaw_err = np.where(switched, yaw, np.where(detected, 0.0, self.yaw_err))
             self.after_err = np.where(switched[:, None], after, self.after_err)
             c, s = np.cos(self.yaw_err), np.sin(self.yaw_err)
@@ -192,10 +197,11 @@ class PerceptionNoiseVecEnv(VecEnvWrapper):
         camera: CameraParams | None = None,
         map_error_m: float = 0.0,
         map_yaw_error_deg: float = 0.0,
+        map_share: float = 1.0,
     ) -> None:
         super().__init__(venv)
         self.noise = PerceptionNoise(
-            model, venv.num_envs, seed, camera, map_error_m, map_yaw_error_deg
+            model, venv.num_envs, seed, camera, map_error_m, map_yaw_error_deg, map_share
         )
 
     def reset(self) -> np.ndarray:

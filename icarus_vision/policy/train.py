@@ -113,7 +113,7 @@ def make_train_env(
         model = ErrorModel.from_config(cfg.perception)
         venv = PerceptionNoiseVecEnv(
             venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m,
-            map_yaw_error_deg=cfg.perception.map_yaw_error_deg,
+            map_yaw_error_deg=cfg.perception.map_yaw_error_deg, map_share=cfg.perception.map_share,
         )  # fmt: skip
     return FeatureVecEnv(venv, features or run_features(cfg))
 

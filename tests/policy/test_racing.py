@@ -107,6 +107,25 @@ def test_the_maps_heading_and_gate_after_are_off_until_the_gate_is_seen():
         config_from_dict({"perception": {"map_yaw_error_deg": -1.0}})
 
 
+def test_only_the_map_share_of_the_drones_fly_with_the_maps_errors():
+    """map_share 0.25: the first quarter of the batch starts each gate from the map's error (as
+    with share 1, the same draws), the rest from an ordinary (here exact) detection."""
+    model = ErrorModel((0.0, 30.0), (0.0, 0.0), (0.0, 0.0))  # detections are exact
+    n = 400
+    obs = _obs(0.0, np.tile([[-5.0, 0.0, 0.0]], (n, 1)))  # behind: unseen
+    obs[:, 15:18] = [1.0, 0.0, 0.0]
+    obs[:, 18:21] = [-9.0, 2.0, 0.0]
+    kw = {"map_error_m": 0.3, "map_yaw_error_deg": 10.0}
+    every = PerceptionNoise(model, n, 0, CameraParams(), **kw).apply(obs, np.ones(n, bool))
+    part = PerceptionNoise(model, n, 0, CameraParams(), **kw, map_share=0.25)
+    some = part.apply(obs, np.ones(n, bool))
+    assert some[:100] == pytest.approx(every[:100])
+    assert some[100:] == pytest.approx(obs[100:])
+    assert np.abs(some[:100, 12:21] - obs[:100, 12:21]).max() > 0.2
+    with pytest.raises(ValueError, match="perception.map_share"):
+        config_from_dict({"perception": {"map_share": 1.5}})
+
+
 def test_auto_picks_a_shipped_specialist_only_for_its_own_layout():
     assert "default" in shipped_policies()
     for name in ("single-gate", "ten-gates"):
