@@ -57,8 +57,10 @@ train-generalist: $(STAMP)
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-replay.toml --seed 0 --out runs/policy-racing-replay --timesteps 20000000
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-replay-more.toml --seed 0 --out runs/policy-racing-replay-more --timesteps 20000000
 	$(BIN)/icarus-vision average-policy runs/policy-racing-replay-more --last 5
-	cp runs/policy-racing-replay-more/average.json icarus_vision/models/policy/default.json
-	cp runs/policy-racing-replay-more/average.safetensors icarus_vision/models/policy/default.safetensors
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-replay-mapshare.toml --seed 0 --out runs/policy-racing-replay-mapshare --timesteps 20000000
+	$(BIN)/icarus-vision average-policy runs/policy-racing-replay-mapshare --last 5
+	cp runs/policy-racing-replay-mapshare/average.json icarus_vision/models/policy/default.json
+	cp runs/policy-racing-replay-mapshare/average.safetensors icarus_vision/models/policy/default.safetensors
 
 # The shipped detector (models/detector/) from nothing, in its two parts (docs/detection.md).
 build-detector: $(STAMP)
