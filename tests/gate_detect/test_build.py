@@ -224,3 +224,33 @@ keep = "shipped"
     assert meta["rescore"] == json.loads((shipped / "detector.json").read_text())["rescore"]
     assert meta["refine_training"]["init"] == str(shipped)
     assert make_detector(f"cnn:{built}").detect(gate_image())
+
+
+def test_graft_takes_the_input_size_with_the_refiner_and_keeps_its_own_for_a_rescorer(tmp_path):
+    """A refiner comes with the input size and decoding it was tuned with; a rescorer put on
+    trained stages leaves theirs (the trained refiner's own tuning)."""
+    import shutil
+
+    from icarus_vision.gate_detect.cnn.build import graft
+    from icarus_vision.gate_detect.cnn.checkpoint import SHIPPED
+
+    tuned = tmp_path / "tuned"
+    shutil.copytree(SHIPPED, tuned)
+    meta = json.loads((tuned / "detector.json").read_text())
+    shipped_size = list(meta["model"]["input_size"])
+    meta["model"]["input_size"] = [320, 240]
+    meta["decode"]["min_snapped"] = meta["decode"]["min_snapped"] + 1
+    del meta["rescore"], meta["rescore_training"]
+    (tuned / "detector.json").write_text(json.dumps(meta))
+    (tuned / "rescore.safetensors").unlink()
+    rescored = json.loads(
+        (graft(tuned, SHIPPED, tmp_path / "r", ["rescorer"]) / "detector.json").read_text()
+    )
+    assert rescored["model"]["input_size"] == [320, 240]
+    assert rescored["decode"] == meta["decode"] and rescored["refine"] == meta["refine"]
+    assert (tmp_path / "r" / "rescore.safetensors").is_file()
+    refined = json.loads(
+        (graft(tuned, SHIPPED, tmp_path / "f", ["refiner"]) / "detector.json").read_text()
+    )
+    assert refined["model"]["input_size"] == shipped_size
+    assert refined["decode"]["min_snapped"] == meta["decode"]["min_snapped"] - 1

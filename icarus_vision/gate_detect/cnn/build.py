@@ -144,7 +144,7 @@ def load_build(path: str | Path) -> BuildSpec:
             raise ValueError(
                 f"{src}: [{stage}].keep: only a corner network, refiner, zoom or rescorer is kept"
             )
-        if not spec.data and not spec.keep and stage != "quantize" and stage != "evaluate":
+        if not spec.data and not spec.keep:
             raise ValueError(f"{src}: [{stage}].data: needs at least one dataset")
         stages[stage] = spec
     for later, needs in (("zoom", "refiner"), ("rescorer", "zoom")):
@@ -283,9 +283,10 @@ def corner_network(source: Path, out: Path) -> Path:
 
 def graft(corner: Path, source: Path, out: Path, stages: list[str]) -> Path:
     """``source``'s later ``stages`` (refiner, zoom, rescorer) on the checkpoint ``corner``,
-    written to ``out``: its corner network reads frames at ``source``'s input size with
-    ``source``'s candidate decoding (what its refiner was tuned with); its own refiner and zoom
-    stage stay where ``source``'s are not put in their place."""
+    written to ``out``. With ``source``'s refiner, the corner network reads frames at
+    ``source``'s input size with ``source``'s candidate decoding (what that refiner was tuned
+    with); otherwise it keeps its own, and its own refiner and zoom stage stay where ``source``'s
+    are not put in their place."""
     from icarus_vision.gate_detect.cnn.checkpoint import (
         load_checkpoint,
         load_refiner,
@@ -295,9 +296,11 @@ def graft(corner: Path, source: Path, out: Path, stages: list[str]) -> Path:
         save_rescorer,
     )
 
-    model, _, meta = load_checkpoint(corner)
-    shipped, decode, smeta = load_checkpoint(source)
-    model.cfg = replace(model.cfg, input_size=shipped.cfg.input_size)
+    model, decode, meta = load_checkpoint(corner)
+    shipped, source_decode, smeta = load_checkpoint(source)
+    if "refiner" in stages:
+        model.cfg = replace(model.cfg, input_size=shipped.cfg.input_size)
+        decode = source_decode
     own = {"refiner": (corner, meta), "zoom": (corner, meta)}
     own.update({k: (source, smeta) for k in stages})
     refiner, zoom = load_refiner(*own["refiner"]), load_zoom(*own["zoom"])
