@@ -132,9 +132,8 @@ class RaceCore:
         self.difficulty = difficulty
 
     def _replay_layout(self, rng: np.random.Generator) -> Track | None:
-        """A failed layout to fly again, or None (drawn only with ``layout_replay`` on)."""
-        if self.cfg.layout_replay <= 0 or self.base_track is not None:
-            return None
+        """A failed layout to fly again, or None (the buffer fills only with ``layout_replay``
+        on random tracks: ``finish_step``)."""
         if not self.replay or rng.random() >= self.cfg.layout_replay:
             return None
         return self.replay.pop(int(rng.integers(len(self.replay))))
