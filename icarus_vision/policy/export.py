@@ -38,6 +38,14 @@ def _paths(path: str | Path) -> tuple[Path, Path]:
     return stem.with_suffix(".safetensors"), stem.with_suffix(".json")
 
 
+def _write(path: str | Path, tensors: dict, desc: dict) -> Path:
+    """Write a policy's tensors and description atomically; returns the .safetensors path."""
+    st, js = _paths(path)
+    atomic_write_bytes(st, save_safetensors(tensors))
+    atomic_write_json(js, desc)
+    return st
+
+
 def export_sb3_policy(
     model,
     path: str | Path,
@@ -74,10 +82,7 @@ def export_sb3_policy(
         "action_dim": 4,
         "meta": meta or {},
     }
-    st, js = _paths(path)
-    atomic_write_bytes(st, save_safetensors(tensors))
-    atomic_write_json(js, desc)
-    return st
+    return _write(path, tensors, desc)
 
 
 @dataclass
@@ -221,10 +226,7 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
             tensors[f"{name}{i}"] = stack.mean(axis=0, dtype=np.float32)
     desc = {k: v for k, v in first.desc.items() if k != "meta"}
     desc["meta"] = {**(meta or {}), "averaged": [str(pol.path.with_suffix("")) for pol in policies]}
-    st, js = _paths(out)
-    atomic_write_bytes(st, save_safetensors(tensors))
-    atomic_write_json(js, desc)
-    return st
+    return _write(out, tensors, desc)
 
 
 def load_init_actor(
