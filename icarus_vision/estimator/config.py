@@ -56,6 +56,10 @@ class MeasurementConfig:
     """Detections solved farther than this are rejected, m."""
     tilt_sigma_deg: float = 10.0
     """Prior spread of a gate's tilt from vertical, used to choose between the two PnP solutions."""
+    center_sigma_px: float = 6.0
+    """Error of a detection's centre, pixels (one σ per coordinate): the direction to a gate,
+    which a detection fixes far better than its range (a small, far detection's range is nearly
+    unknown). Used by the filter's ``bearing_chi2`` gate."""
     ambiguity_gap: float = 30.0
     """The second PnP solution is dropped when its cost (reprojection χ² + tilt) exceeds the best
     one's by more than this; otherwise the gate's heading estimate decides between them."""
@@ -63,6 +67,8 @@ class MeasurementConfig:
     def __post_init__(self) -> None:
         if not self.pixel_sigma > 0:
             raise ValueError(f"pixel_sigma must be > 0, got {self.pixel_sigma}")
+        if not self.center_sigma_px > 0:
+            raise ValueError(f"center_sigma_px must be > 0, got {self.center_sigma_px}")
         if not self.cov_scale > 0:
             raise ValueError(f"cov_scale must be > 0, got {self.cov_scale}")
         if not self.range_inflation_m > 0:
@@ -79,6 +85,12 @@ class FilterConfig:
     """Random-walk density of a gate's heading in the odometry frame, degrees/√s."""
     gate_chi2: float = 18.5
     """Mahalanobis gate on the 4-D innovation (χ², 4 dof: 18.5 ⇒ p = 0.999)."""
+    bearing_chi2: float = 13.8
+    """Gate on the direction alone (χ², 2 dof: 13.8 ⇒ p = 0.999): a detection whose centre lies
+    farther from where a gate's estimate projects than the estimate's spread and
+    ``center_sigma_px`` allow is not that gate, however uncertain its range. Without it the 4-D
+    gate lets a small far detection (a distractor) match any gate roughly ahead, and its updates
+    drag the gate away one frame at a time. inf: off."""
     reinit_count: int = 3
     """Rejected but mutually consistent measurements that re-initialise a gate (wrong prior)."""
     reinit_window_s: float = 0.5
@@ -98,6 +110,8 @@ class FilterConfig:
             raise ValueError(f"reinit_count must be >= 2, got {self.reinit_count}")
         if not self.gate_chi2 > 0:
             raise ValueError(f"gate_chi2 must be > 0, got {self.gate_chi2}")
+        if not self.bearing_chi2 > 0:
+            raise ValueError(f"bearing_chi2 must be > 0, got {self.bearing_chi2}")
 
 
 @dataclass(frozen=True)

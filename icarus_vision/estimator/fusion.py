@@ -40,6 +40,8 @@ class FrameSolutions:
         two: (D,) whether the second slot holds a solution.
         cov6: (D, 6, 6) :func:`.pnp.pose_covariance` of the best solutions.
         distance: (D,) camera to the best solution's gate centre, m.
+        bearing_sigma: (2,) error of a detection's direction in normalised image coordinates
+            (x / z, y / z): its centre's pixels and the odometry's attitude.
     """
 
     r_cam_gate: np.ndarray
@@ -48,6 +50,7 @@ class FrameSolutions:
     two: np.ndarray
     cov6: np.ndarray
     distance: np.ndarray
+    bearing_sigma: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -116,7 +119,10 @@ def solve_detections(
     t = np.array([(a.t_cam_gate, b.t_cam_gate) for a, b in slots])
     cov6 = pose_covariance(k, r[:, 0], t[:, 0], 1.0, cfg.pixel_sigma)
     costs_arr = np.array(costs)
-    frame = FrameSolutions(r, t, costs_arr, np.isfinite(costs_arr[:, 1]), cov6, np.array(distance))
+    att = math.radians(cfg.odometry_att_sigma_deg)
+    bearing_sigma = np.hypot(cfg.center_sigma_px / np.array([k[0, 0], k[1, 1]]), att)
+    frame = FrameSolutions(r, t, costs_arr, np.isfinite(costs_arr[:, 1]), cov6, np.array(distance),
+                           bearing_sigma)  # fmt: skip
     return frame, reasons
 
 
@@ -136,27 +142,66 @@ def measure_frame(
     return FrameMeasurements(z, cov, np.sqrt(np.sum(t * t, axis=-1)))
 
 
+def bearing_sq(
+    sol: FrameSolutions,
+    means: np.ndarray,
+    covs: np.ndarray,
+    r_world_cam: np.ndarray,
+    t_world_cam: np.ndarray,
+) -> np.ndarray:
+    """Squared Mahalanobis distances of each solution's direction from where each gate's
+    estimate projects (χ², 2 dof), in normalised image coordinates; inf for a gate behind the
+    camera.
+
+    Args:
+        means: (M, 4), covs: (M, 4, 4) gate tracks.
+
+    Returns:
+        (D, 2, M) χ² values.
+    """
+    p = (means[:, :3] - t_world_cam) @ r_world_cam  # (M, 3) camera frame
+    z = p[:, 2]
+    ahead = z > 1e-3
+    zs = np.where(ahead, z, 1.0)
+    jac = np.zeros((len(p), 2, 3))  # d(x/z, y/z) / d(camera frame), then / d(world)
+    jac[:, 0, 0] = jac[:, 1, 1] = 1.0 / zs
+    jac[:, :, 2] = -p[:, :2] / zs[:, None] ** 2
+    jac = jac @ r_world_cam.T
+    spread = jac @ covs[:, :3, :3] @ np.swapaxes(jac, 1, 2) + np.diag(sol.bearing_sigma**2)
+    t = sol.t_cam_gate
+    seen = t[..., :2] / t[..., 2:3]  # (D, 2, 2)
+    nu = seen[:, :, None, :] - (p[:, :2] / zs[:, None])  # (D, 2, M, 2)
+    d2 = np.einsum("dkmi,mij,dkmj->dkm", nu, np.linalg.inv(spread), nu)
+    return np.where(ahead, d2, np.inf)
+
+
 def _best_tracks(
-    m: FrameMeasurements, gaps: np.ndarray, means: np.ndarray, covs: np.ndarray
-) -> tuple[np.ndarray, ...]:
+    m: FrameMeasurements, gaps: np.ndarray, means: np.ndarray, covs: np.ndarray,
+    off_bearing: np.ndarray,
+) -> tuple[np.ndarray, ...]:  # fmt: skip
     """Each detection's best (solution slot, gate) pair: the lowest d² + cost gap.
 
     Args:
         gaps: (D, 2) each slot's cost minus the best slot's.
         means: (M, 4), covs: (M, 4, 4) gate tracks (of the measurements' size).
+        off_bearing: (D, 2, M) pairs outside the direction gate (:func:`bearing_sq`): their d² is
+            infinite.
 
     Returns:
         (D,) arrays: the score, its d², the gate (index into ``means``), the slot, and the other
         slot's score at that gate minus the best one's.
     """
     d2 = batch_mahalanobis_sq(means, covs, m.z, m.cov)  # (D, 2, M)
+    d2 = np.where(off_bearing, np.inf, d2)
     score = (d2 + gaps[..., None]).reshape(len(d2), -1)  # slot-major, as (slot, gate) pairs
     best = score.argmin(axis=1)
     rows = np.arange(len(d2))
     other = (best + len(means)) % score.shape[1]  # the other slot, same gate
     slot, gate = np.divmod(best, len(means))
     top = score[rows, best]
-    return top, d2.reshape(len(d2), -1)[rows, best], gate, slot, score[rows, other] - top
+    with np.errstate(invalid="ignore"):  # inf - inf where nothing is within the gate
+        alt = score[rows, other] - top
+    return top, d2.reshape(len(d2), -1)[rows, best], gate, slot, alt
 
 
 def _measurement(
@@ -183,6 +228,7 @@ def match_detections(
 
     Both PnP solutions are tried against every track of each gate size (Mahalanobis distance plus
     the solution's cost gap); a detection within the χ² gate of its best track is matched to it.
+    A track whose projected direction the detection misses (``bearing_chi2``) is never its match.
 
     Args:
         new_size: gate size of a measurement that fits no track, m.
@@ -195,12 +241,15 @@ def match_detections(
     means = np.array([tr.mean for tr in tracks]).reshape(-1, 4)
     covs = np.array([tr.cov for tr in tracks]).reshape(-1, 4, 4)
     track_size = np.array([tr.size for tr in tracks])
+    off_bearing = bearing_sq(sol, means, covs, r_world_cam, t_world_cam) > cfg.filter.bearing_chi2
     measured: dict[float, FrameMeasurements] = {}
     groups = []  # per gate size: its measurements and _best_tracks' results as lists
     for size in sorted(set(track_size.tolist())):
         idx = np.flatnonzero(track_size == size)
         m = measured[size] = measure_frame(sol, size, r_world_cam, t_world_cam, cfg.measurement)
-        score, d2, gate, slot, alt = _best_tracks(m, gaps, means[idx], covs[idx])
+        score, d2, gate, slot, alt = _best_tracks(
+            m, gaps, means[idx], covs[idx], off_bearing[:, :, idx]
+        )
         track = idx[gate]  # index into ``tracks``
         groups.append((m, *(a.tolist() for a in (score, d2, track, slot, alt))))
     pairs, unmatched = [], []

@@ -5,8 +5,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
-from icarus_vision.estimator.config import EstimatorConfig, MeasurementConfig
+from icarus_vision.estimator.config import EstimatorConfig, FilterConfig, MeasurementConfig
 from icarus_vision.estimator.filter import GateTrack, heading_spread
 from icarus_vision.estimator.fusion import (
     _measurement,
@@ -110,3 +111,44 @@ def test_a_plausible_second_solution_widens_only_that_measurements_heading():
         np.testing.assert_array_equal(got.cov[:3], shared[:3])
         np.testing.assert_array_equal(m.cov[d], shared)  # the frame's shared covariance is intact
     assert sols.two.any()  # the view has ambiguous detections, so the widening was exercised
+
+
+def test_a_small_detection_off_the_gates_direction_is_not_that_gate():
+    """A far, small detection has a nearly unknown range, so the 4-D gate alone accepts it for any
+    gate roughly ahead; the direction gate turns it away unless it lies where the gate projects."""
+    od = odom_at(0.0, [0.0, 0.0, 2.0])
+    r_wc, t_wc = CAM.pose(od.pos, od.quat)
+    gate = Gate((10.0, 0.0, 2.0))
+    centre = CAM.project(np.asarray(gate.corners()), od.pos, od.quat)[0].mean(axis=0)
+    cov = np.diag([0.5**2] * 3 + [math.radians(10.0) ** 2])
+    noisy = MeasurementConfig(pixel_sigma=12.0, range_inflation_m=10.0)
+    square = np.array([[-5.0, -5.0], [5.0, -5.0], [5.0, 5.0], [-5.0, 5.0]])
+
+    def matched(shift_px: float, bearing_chi2: float) -> bool:
+        det = GateDetection(centre + [shift_px, 0.0] + square, np.ones(4), 0.9)
+        sols, _ = solve_detections([det], CAM.K, SIZE, r_wc, t_wc, noisy, 1.0)
+        track = GateTrack(np.array(gate.pos), gate.yaw, cov, gate.size, 0.0, True)
+        cfg = EstimatorConfig(measurement=noisy, filter=FilterConfig(bearing_chi2=bearing_chi2))
+        pairs, unmatched = match_detections(sols, [track], 1.0, r_wc, t_wc, cfg)
+        assert len(pairs) + len(unmatched) == 1
+        return bool(pairs)
+
+    assert matched(0.0, 13.8) and matched(30.0, 13.8)  # on the gate, or within its spread
+    assert matched(60.0, math.inf)  # 20 degrees off: the range's spread covers it
+    assert not matched(60.0, 13.8) and not matched(90.0, 13.8)
+
+
+def test_a_gate_behind_the_camera_matches_nothing():
+    _, dets, r_wc, t_wc = _view()
+    cov = np.diag([0.3**2] * 3 + [math.radians(10.0) ** 2])
+    behind = GateTrack(np.array([-5.0, 0.0, 2.0]), 0.0, cov * 1e4, 1.0, 0.0, True)
+    sols, _ = solve_detections(dets, CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+    pairs, unmatched = match_detections(sols, [behind], 1.0, r_wc, t_wc, EstimatorConfig())
+    assert not pairs and len(unmatched) == len(dets)
+
+
+def test_the_direction_gate_settings_are_checked():
+    with pytest.raises(ValueError, match="bearing_chi2"):
+        FilterConfig(bearing_chi2=0.0)
+    with pytest.raises(ValueError, match="center_sigma_px"):
+        MeasurementConfig(center_sigma_px=-1.0)
