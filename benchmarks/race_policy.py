@@ -4,7 +4,7 @@
         [--policy default] [--backend pybullet] [--json PATH]
     .venv/bin/python benchmarks/race_policy.py specialists [--seeds 20] [--track NAME]
         [--policy auto] [--json PATH]
-    .venv/bin/python benchmarks/race_policy.py vision [--tracks 80] [--difficulty 1.0]
+    .venv/bin/python benchmarks/race_policy.py vision [--tracks 140] [--difficulty 1.0]
         [--policy default] [--json PATH]
 
 ``builtin``: every built-in track, `race --randomize --detector cnn --policy default` (the
@@ -115,7 +115,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("what", choices=["builtin", "specialists", "vision"])
     ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--tracks", type=int, default=80)
+    ap.add_argument("--tracks", type=int, default=140)
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--detector", default="cnn")
     ap.add_argument("--policy", default=None,
