@@ -24,6 +24,7 @@ def eval_policy_cmd(
         None, help="Built-in track name or TOML path (default: random tracks)."
     ),
     gates: int = typer.Option(10, min=1, help="Gates per random track."),
+    quad: Path = typer.Option(None, help="Quadrotor TOML file (default: the built-in racer-500g)."),
     difficulty: float = typer.Option(
         None,
         min=0.0,
@@ -58,13 +59,15 @@ def eval_policy_cmd(
     from icarus_vision.policy.evaluate import evaluate_policy, time_optimal_fields
     from icarus_vision.policy.pilots import resolve_policy
     from icarus_vision.sim.builtin import resolve_track
+    from icarus_vision.sim.quad import load_quad
 
     check_output(json_path)
     base = None if track is None else resolve_track(track)
+    quad_params = None if quad is None else load_quad(quad)
     pilot = resolve_policy(policy, track=base)
     r = evaluate_policy(pilot, track, episodes=episodes, num_gates=gates, backend=backend,
-                        randomize=randomize, seed=seed, difficulty=difficulty)  # fmt: skip
-    r.update(time_optimal_fields(base, r["lap_time_s"]["median"], solve=plan))
+                        randomize=randomize, seed=seed, difficulty=difficulty, quad=quad_params)  # fmt: skip
+    r.update(time_optimal_fields(base, r["lap_time_s"]["median"], solve=plan, quad=quad_params))
     if json_path is not None:  # results first: nothing printed below can lose them
         atomic_write_json(json_path, r)
     table = Table(title=f"eval-policy: {r['policy']} on {r['track']} ({r['backend']})")

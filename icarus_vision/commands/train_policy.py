@@ -34,6 +34,11 @@ def train_policy_cmd(
         help="Train a specialist on this track (built-in name or TOML path) instead of random "
         "tracks; without --config or --preset the specialist preset is used.",
     ),
+    quad: Path = typer.Option(
+        None,
+        help="Quadrotor TOML file to train for: its dynamics and its camera (the camera-angle cost "
+        "and the out-of-view rule); default: the config's, else the built-in racer-500g.",
+    ),
     init: str = typer.Option(
         None,
         help="Start the actor from an exported policy: default (the shipped generalist), a shipped "
@@ -59,7 +64,7 @@ def train_policy_cmd(
     from icarus_vision.policy.config import PRESETS, load_run_config, load_train_config
     from icarus_vision.policy.train import train_policy
 
-    explicit = any(v is not None for v in (config, preset, track, init, error_model))
+    explicit = any(v is not None for v in (config, preset, track, quad, init, error_model))
     if resume and out is not None and not explicit:
         cfg = load_run_config(out)  # the run's own settings
     elif config is not None:
@@ -73,6 +78,8 @@ def train_policy_cmd(
 
         resolve_track(track)  # a bad name or file fails before anything is written
         cfg = replace(cfg, track=track)
+    if quad is not None:
+        cfg = replace(cfg, quad=str(quad))
     if init is not None:
         cfg = replace(cfg, init=init)
     if error_model is not None:

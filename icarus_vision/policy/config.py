@@ -171,6 +171,10 @@ class TrainConfig:
     track: str | None = None
     """Fixed track (built-in name or TOML path) for a specialist; None: random tracks with the
     curriculum. With a track the curriculum has one stage: the whole track."""
+    quad: str | None = None
+    """Quadrotor TOML file the policy is trained for (its dynamics, limits and camera: the
+    camera-angle cost and the out-of-view rule use its camera; randomisation varies mass, thrust
+    and drag around it); None: the built-in racer-500g. Race it with ``race --quad`` the same file."""
     init: str | None = None
     """Start the actor from an exported policy (``default`` or a path); None: from scratch."""
     init_critic_steps: int = 0

@@ -54,6 +54,7 @@ def evaluate_policy(
     randomize: bool = False,
     seed: int = 0,
     difficulty: float | None = None,
+    quad: QuadParams | None = None,
 ) -> dict:
     """Fly ``episodes`` episodes and report success, crashes, gates, lap times and speeds.
 
@@ -66,6 +67,7 @@ def evaluate_policy(
         randomize: domain randomisation (mass, thrust, wind, gate jitter).
         difficulty: random tracks only: None draws classic ``random_track`` layouts, a value in
             [0, 1] ``race_track`` layouts of that difficulty.
+        quad: the quadrotor (None: the built-in racer-500g).
 
     Returns:
         The eval-policy JSON fields of ARCHITECTURE.md plus crash reasons and mean speed.
@@ -75,7 +77,7 @@ def evaluate_policy(
     obs_mode = policy.observation if isinstance(policy, ExportedPolicy) else "basic"
     base = None if track is None else resolve_track(track)
     cfg = EnvConfig(
-        track=base, random_tracks=base is None, num_gates=num_gates if base is None else None,
+        track=base, quad=quad or QuadParams(), random_tracks=base is None, num_gates=num_gates if base is None else None,
         layout_difficulty=difficulty if base is None else None, randomization=RandomizationConfig(enabled=randomize), observation=obs_mode,
     )  # fmt: skip
     check_backend(backend)

@@ -110,6 +110,11 @@ class ExportedPolicy:
     def name(self) -> str:
         return self.desc.get("meta", {}).get("name", self.path.stem)
 
+    @property
+    def quad(self) -> str | None:
+        """Name of the quadrotor it was trained for (None: not recorded, the built-in racer-500g)."""
+        return self.desc.get("meta", {}).get("quad")
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Deterministic actions.
 

@@ -44,7 +44,7 @@ from icarus_vision.policy.features import FEATURES_V1, FEATURES_VERSIONS, Featur
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
-from icarus_vision.sim.quad import QuadParams
+from icarus_vision.sim.quad import QuadParams, load_quad
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
 
@@ -79,6 +79,11 @@ def run_features(cfg: TrainConfig) -> str:
     return FEATURES_V1
 
 
+def train_quad(cfg: TrainConfig) -> QuadParams:
+    """The quadrotor ``cfg`` trains for: its ``quad`` file, or the built-in racer-500g."""
+    return QuadParams() if cfg.quad is None else load_quad(cfg.quad)
+
+
 def make_train_env(
     cfg: TrainConfig,
     num_envs: int,
@@ -97,6 +102,7 @@ def make_train_env(
     track = None if cfg.track is None else resolve_track(cfg.track)
     env_cfg = EnvConfig(
         track=track,
+        quad=train_quad(cfg),
         random_tracks=track is None,
         num_gates=num_gates,
         layout_difficulty=difficulty if track is None else None,
@@ -198,6 +204,7 @@ def train_policy(
     out = Path(out)
     ckpt_dir = out / "checkpoints"
     total = timesteps if timesteps is not None else cfg.total_timesteps
+    quad = train_quad(cfg)  # a bad quadrotor file fails before anything is written
     state = {"stage": 0, "best": [-1, -1.0], "wall_s": 0.0, "metrics": []}
     if resume:
         last = ckpt_dir / "last.zip"
@@ -271,7 +278,7 @@ def train_policy(
             verbose=0,
         )
         with torch.no_grad():  # start from hover: mean thrust action balances gravity
-            model.policy.action_net.bias[0] = QuadParams().hover_thrust_action
+            model.policy.action_net.bias[0] = quad.hover_thrust_action
         if cfg.init is not None:
             load_init_actor(model, cfg.init, cfg.observation, features)
 
@@ -348,7 +355,7 @@ def train_policy(
     _save_checkpoint(model, ckpt_dir, snapshot())
     atomic_write_json(out / "metrics.json", metrics.rows)
     meta = {"name": out.name, "timesteps": int(model.num_timesteps), "num_gates": curriculum.num_gates,
-            "seed": seed, "preset": cfg.preset}  # fmt: skip
+            "seed": seed, "preset": cfg.preset, "quad": quad.name}  # fmt: skip
     policy_path = export_sb3_policy(model, out / "policy", cfg.observation, meta, features)
     if not (out / "best.safetensors").exists():
         for ext in (".safetensors", ".json"):

@@ -8,6 +8,7 @@ trajectory and, when asked, the video frames.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -122,6 +123,13 @@ def run_race(
         base = base.with_laps(laps)
     quad = quad or QuadParams()
     pilot_spec = resolve_policy(policy, track=base)
+    trained_for = pilot_spec.quad if isinstance(pilot_spec, ExportedPolicy) else None
+    if trained_for not in (None, quad.name):
+        warnings.warn(
+            f"policy {pilot_spec.name} was trained for the quadrotor {trained_for!r}; this race "
+            f"flies {quad.name!r}",
+            stacklevel=2,
+        )
     ghost = planned_ghost(base, quad)
     obs_mode = pilot_spec.observation if isinstance(pilot_spec, ExportedPolicy) else "basic"
     cfg = EnvConfig(
