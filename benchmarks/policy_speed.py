@@ -8,7 +8,9 @@ Lap ratio: draws ``race_track(gates, seed, difficulty)`` for seeds from ``--seed
 ``runs/plans/``, as `plan` does; a track the planner cannot solve is listed and skipped), then flies
 the policy once on each planned track with ground truth and the nominal quadrotor (the plan's own
 model; no randomisation) and reports lap / time-optimal per track and the median over the tracks the
-policy finished. ``--plan-only`` fills the cache and stops.
+policy finished, with where the time goes: the policy's path length over the plan's
+(``path_ratio``) and its mean speed over the plan's (``speed_ratio``; lap ratio = path ratio /
+speed ratio). ``--plan-only`` fills the cache and stops.
 
 Finish rate: the policy on ``--finish-episodes`` random race layouts of the same distribution
 (seed 5000 on), ground truth, randomisation on (mass ±20 %, thrust ±10 %, wind, gusts, gate jitter).
@@ -30,14 +32,16 @@ from icarus_vision.sim.race_layouts import race_track
 
 
 def planned_tracks(n: int, seed0: int, gates: int, difficulty: float) -> tuple[list, list[int]]:
-    """(track, plan time) for the first ``n`` seeds from ``seed0`` whose plan solves; failed seeds."""
+    """(seed, track, plan time, plan path length) for the first ``n`` seeds from ``seed0`` whose
+    plan solves; failed seeds."""
     out, failed, seed = [], [], seed0
     while len(out) < n:
         track = race_track(gates, seed, difficulty=difficulty)
         t0 = time.perf_counter()
         try:
             result = plan(track)
-            out.append((seed, track, result.time_optimal_s))
+            path = float(np.linalg.norm(np.diff(result.pos, axis=0), axis=1).sum())
+            out.append((seed, track, result.time_optimal_s, path))
             print(
                 f"seed {seed}: plan {result.time_optimal_s:.3f} s ({time.perf_counter() - t0:.0f} s)",
                 flush=True,
@@ -47,6 +51,10 @@ def planned_tracks(n: int, seed0: int, gates: int, difficulty: float) -> tuple[l
             print(f"seed {seed}: no plan ({e.status})", flush=True)
         seed += 1
     return out, failed
+
+
+def _median(values: list[float]) -> float | None:
+    return round(float(np.median(values)), 4) if values else None
 
 
 def main() -> None:
@@ -66,11 +74,13 @@ def main() -> None:
         return
     pol = resolve_policy(args.policy)
     rows = []
-    for seed, track, best in planned:
+    for seed, track, best, plan_path in planned:
         r = evaluate_policy(pol, track, episodes=1, randomize=False, seed=0)
-        lap = r["lap_time_s"]["median"]
+        lap, speed = r["lap_time_s"]["median"], r["mean_speed_mps"]
         rows.append({"seed": seed, "time_optimal_s": round(best, 4), "finished": r["success_rate"] == 1.0,
-                     "lap_s": lap, "ratio": None if lap is None else round(lap / best, 4)})  # fmt: skip
+                     "lap_s": lap, "ratio": None if lap is None else round(lap / best, 4),
+                     "path_ratio": None if lap is None else round(speed * lap / plan_path, 4),
+                     "speed_ratio": round(speed * best / plan_path, 4)})  # fmt: skip
         print(rows[-1], flush=True)
     ratios = [r["ratio"] for r in rows if r["ratio"] is not None]
     finish = evaluate_policy(pol, None, episodes=args.finish_episodes, num_gates=args.gates,
@@ -85,6 +95,8 @@ def main() -> None:
         "ratio_p10_p90": [round(float(np.percentile(ratios, q)), 4) for q in (10, 90)]
         if ratios
         else None,
+        "median_path_ratio": _median([r["path_ratio"] for r in rows if r["ratio"] is not None]),
+        "median_speed_ratio": _median([r["speed_ratio"] for r in rows if r["ratio"] is not None]),
         "finish_rate_randomised": finish["success_rate"],
         "finish_episodes": finish["episodes"],
         "crash_reasons": finish["crash_reasons"],
