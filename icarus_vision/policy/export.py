@@ -210,7 +210,8 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
         meta: the averaged policy's meta (its ``averaged`` entry lists ``paths``).
 
     Raises:
-        ValueError: no policy, or policies that differ in what they read or their layers.
+        ValueError: no policy, or policies that differ in what they read, their layers or the
+            quadrotor they were trained for.
     """
     if not paths:
         raise ValueError("average of no policies: give at least one")
@@ -219,6 +220,7 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
     first = policies[0]
     for pol in policies[1:]:
         differ = [k for k in keys if pol.desc.get(k) != first.desc.get(k)]
+        differ += ["quadrotor"] if pol.quad != first.quad else []
         if differ:
             raise ValueError(
                 f"{pol.path}: its {', '.join(differ)} differ from {first.path}'s; only policies "
@@ -231,6 +233,8 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
             tensors[f"{name}{i}"] = stack.mean(axis=0, dtype=np.float32)
     desc = {k: v for k, v in first.desc.items() if k != "meta"}
     desc["meta"] = {**(meta or {}), "averaged": [str(pol.path.with_suffix("")) for pol in policies]}
+    if first.quad is not None:
+        desc["meta"]["quad"] = first.quad
     return _write(out, tensors, desc)
 
 

@@ -319,6 +319,7 @@ def train_policy(
                     "difficulty": curriculum.difficulty,
                     "eval_success": ev.success,
                     "eval_lap_per_gate_s": ev.lap_per_gate_s,
+                    "quad": quad.name,
                 }
                 evaluated = out / "evaluated" / f"{self.num_timesteps:09d}"
                 evaluated.parent.mkdir(exist_ok=True)

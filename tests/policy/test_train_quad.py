@@ -59,12 +59,16 @@ def test_a_policy_trained_for_a_quad_records_it_and_starts_at_its_hover(tmp_path
         ppo=PPOConfig(num_envs=16, n_steps=32, batch_size=256, n_epochs=1, torch_threads=1),
         curriculum=CurriculumConfig(stages=(1,)),
         checkpoint_every=10**9,
-        eval_every=10**9,
+        eval_every=512,
+        eval_episodes=4,
         quad=str(quad_file(tmp_path, "heavy", ttw=2.5)),
     )
     res = train_policy(tiny, tmp_path / "run", seed=0, timesteps=512, verbose=0)
     pol = load_policy(res.policy_path)
     assert pol.quad == "heavy"
+    assert [load_policy(p).quad for p in (tmp_path / "run" / "evaluated").glob("*.json")] == [
+        "heavy"
+    ]
     # one short update moves the bias little from the heavy drone's hover (2/2.5 - 1 = -0.2),
     # far from the built-in drone's (2/4 - 1 = -0.5)
     assert abs(pol.weights[-1][1][0] - (-0.2)) < 0.1
@@ -113,3 +117,19 @@ def test_race_warns_when_the_policy_was_trained_for_another_quad(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run_race("single-gate", **race)
+
+
+def test_an_average_keeps_the_quad_and_refuses_policies_of_two(tmp_path):
+    from icarus_vision.policy.export import average_policies
+
+    src = shipped_policy_path("default")
+    paths = []
+    for name, quad in (("a", "mine"), ("b", "mine"), ("c", "another")):
+        shutil.copyfile(src.with_suffix(".safetensors"), tmp_path / f"{name}.safetensors")
+        desc = json.loads(src.with_suffix(".json").read_text())
+        desc["meta"] = {"name": name, "quad": quad}
+        (tmp_path / f"{name}.json").write_text(json.dumps(desc))
+        paths.append(tmp_path / name)
+    assert load_policy(average_policies(paths[:2], tmp_path / "avg")).quad == "mine"
+    with pytest.raises(ValueError, match="quadrotor differ"):
+        average_policies(paths, tmp_path / "bad")
