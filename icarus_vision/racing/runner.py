@@ -123,7 +123,10 @@ def run_race(
         base = base.with_laps(laps)
     quad = quad or QuadParams()
     pilot_spec = resolve_policy(policy, track=base)
-    trained_for = pilot_spec.quad if isinstance(pilot_spec, ExportedPolicy) else None
+    # a policy that records no quadrotor was trained for the built-in one
+    trained_for = (
+        (pilot_spec.quad or QuadParams().name) if isinstance(pilot_spec, ExportedPolicy) else None
+    )
     if trained_for not in (None, quad.name):
         warnings.warn(
             f"policy {pilot_spec.name} was trained for the quadrotor {trained_for!r}; this race "

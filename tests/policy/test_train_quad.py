@@ -19,7 +19,7 @@ from icarus_vision.policy.pilots import shipped_policy_path
 from icarus_vision.policy.train import make_train_env, train_policy
 from icarus_vision.racing.runner import run_race
 from icarus_vision.sim.config import RandomizationConfig
-from icarus_vision.sim.quad import QuadError
+from icarus_vision.sim.quad import QuadError, load_quad
 
 
 def quad_file(tmp_path: Path, name: str, uptilt: float = 20.0, ttw: float = 4.0) -> Path:
@@ -117,6 +117,13 @@ def test_race_warns_when_the_policy_was_trained_for_another_quad(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run_race("single-gate", **race)
+    # a policy that records none was trained for the built-in drone
+    del desc["meta"]["quad"]
+    (tmp_path / "pol.json").write_text(json.dumps(desc))
+    with pytest.warns(
+        UserWarning, match="trained for the quadrotor 'racer-500g'; this race flies 'mine'"
+    ):
+        run_race("single-gate", quad=load_quad(quad_file(tmp_path, "mine")), **race)
 
 
 def test_an_average_keeps_the_quad_and_refuses_policies_of_two(tmp_path):
