@@ -81,6 +81,8 @@ def evaluate_policy(
         layout_difficulty=difficulty if base is None else None, randomization=RandomizationConfig(enabled=randomize), observation=obs_mode,
     )  # fmt: skip
     check_backend(backend)
+    if isinstance(policy, ExportedPolicy):
+        policy.check_quad(cfg.quad, "this evaluation")
     if backend == "batched":
         results = _run_batched(policy, cfg, episodes, seed)
     else:

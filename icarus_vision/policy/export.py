@@ -10,6 +10,7 @@ features -> tanh MLP -> mean action, clipped to [-1, 1] (the deterministic polic
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from icarus_vision.policy.features import (
     obs_to_features,
 )
 from icarus_vision.sim.observation import OBS_DIMS
+from icarus_vision.sim.quad import QuadParams
 
 FORMAT = "icarus-policy-v1"
 ACTION = "ctbr"
@@ -114,6 +116,17 @@ class ExportedPolicy:
     def quad(self) -> str | None:
         """Name of the quadrotor it was trained for (None: not recorded, the built-in racer-500g)."""
         return self.desc.get("meta", {}).get("quad")
+
+    def check_quad(self, quad: QuadParams, flight: str = "this race") -> None:
+        """Warn when ``quad`` is not the quadrotor the policy was trained for (a policy that
+        records none was trained for the built-in one)."""
+        trained_for = self.quad or QuadParams().name
+        if trained_for != quad.name:
+            warnings.warn(
+                f"policy {self.name} was trained for the quadrotor {trained_for!r}; {flight} "
+                f"flies {quad.name!r}",
+                stacklevel=3,
+            )
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Deterministic actions.

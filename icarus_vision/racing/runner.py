@@ -8,7 +8,6 @@ trajectory and, when asked, the video frames.
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,16 +122,8 @@ def run_race(
         base = base.with_laps(laps)
     quad = quad or QuadParams()
     pilot_spec = resolve_policy(policy, track=base)
-    # a policy that records no quadrotor was trained for the built-in one
-    trained_for = (
-        (pilot_spec.quad or QuadParams().name) if isinstance(pilot_spec, ExportedPolicy) else None
-    )
-    if trained_for not in (None, quad.name):
-        warnings.warn(
-            f"policy {pilot_spec.name} was trained for the quadrotor {trained_for!r}; this race "
-            f"flies {quad.name!r}",
-            stacklevel=2,
-        )
+    if isinstance(pilot_spec, ExportedPolicy):
+        pilot_spec.check_quad(quad)
     ghost = planned_ghost(base, quad)
     obs_mode = pilot_spec.observation if isinstance(pilot_spec, ExportedPolicy) else "basic"
     cfg = EnvConfig(

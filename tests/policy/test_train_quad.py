@@ -14,12 +14,13 @@ from typer.testing import CliRunner
 
 from icarus_vision.cli import app
 from icarus_vision.policy.config import FAST, RACING, CurriculumConfig, PPOConfig
+from icarus_vision.policy.evaluate import evaluate_policy
 from icarus_vision.policy.export import load_policy
 from icarus_vision.policy.pilots import shipped_policy_path
 from icarus_vision.policy.train import make_train_env, train_policy
 from icarus_vision.racing.runner import run_race
 from icarus_vision.sim.config import RandomizationConfig
-from icarus_vision.sim.quad import QuadError, load_quad
+from icarus_vision.sim.quad import QuadError, QuadParams, load_quad
 
 
 def quad_file(tmp_path: Path, name: str, uptilt: float = 20.0, ttw: float = 4.0) -> Path:
@@ -124,6 +125,12 @@ def test_race_warns_when_the_policy_was_trained_for_another_quad(tmp_path):
         UserWarning, match="trained for the quadrotor 'racer-500g'; this race flies 'mine'"
     ):
         run_race("single-gate", quad=load_quad(quad_file(tmp_path, "mine")), **race)
+
+
+def test_eval_policy_warns_too():
+    pol = load_policy(shipped_policy_path("default"))
+    with pytest.warns(UserWarning, match="'racer-500g'; this evaluation flies 'mine'"):
+        evaluate_policy(pol, "single-gate", episodes=1, quad=QuadParams(name="mine"))
 
 
 def test_an_average_keeps_the_quad_and_refuses_policies_of_two(tmp_path):
