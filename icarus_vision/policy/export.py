@@ -113,17 +113,16 @@ class ExportedPolicy:
         return self.desc.get("meta", {}).get("name", self.path.stem)
 
     @property
-    def quad(self) -> str | None:
-        """Name of the quadrotor it was trained for (None: not recorded, the built-in racer-500g)."""
-        return self.desc.get("meta", {}).get("quad")
+    def quad(self) -> str:
+        """Name of the quadrotor it was trained for (a policy that records none, like those
+        exported before quadrotor files could be trained for, was trained for the built-in one)."""
+        return self.desc.get("meta", {}).get("quad", QuadParams().name)
 
     def check_quad(self, quad: QuadParams, flight: str = "this race") -> None:
-        """Warn when ``quad`` is not the quadrotor the policy was trained for (a policy that
-        records none was trained for the built-in one)."""
-        trained_for = self.quad or QuadParams().name
-        if trained_for != quad.name:
+        """Warn when ``quad`` is not the quadrotor the policy was trained for."""
+        if self.quad != quad.name:
             warnings.warn(
-                f"policy {self.name} was trained for the quadrotor {trained_for!r}; {flight} "
+                f"policy {self.name} was trained for the quadrotor {self.quad!r}; {flight} "
                 f"flies {quad.name!r}",
                 stacklevel=3,
             )
@@ -245,9 +244,8 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
             stack = np.stack([pol.weights[i][j] for pol in policies]).astype(np.float32)
             tensors[f"{name}{i}"] = stack.mean(axis=0, dtype=np.float32)
     desc = {k: v for k, v in first.desc.items() if k != "meta"}
-    desc["meta"] = {**(meta or {}), "averaged": [str(pol.path.with_suffix("")) for pol in policies]}
-    if first.quad is not None:
-        desc["meta"]["quad"] = first.quad
+    desc["meta"] = {**(meta or {}), "averaged": [str(pol.path.with_suffix("")) for pol in policies],
+                    "quad": first.quad}  # fmt: skip
     return _write(out, tensors, desc)
 
 

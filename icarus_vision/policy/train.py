@@ -92,17 +92,19 @@ def make_train_env(
     difficulty: float | None = None,
     features: str | None = None,
     layout_replay: float = 0.0,
+    quad: QuadParams | None = None,
 ):
     """The training VecEnv stack: batched drones -> perception noise -> policy features.
 
     Random tracks of ``num_gates`` gates at layout ``difficulty`` (None: classic layouts), or the
     config's fixed ``track``; ``features``: the transform (None: ``run_features(cfg)``);
-    ``layout_replay``: the chance an episode re-flies a failed layout (training only).
+    ``layout_replay``: the chance an episode re-flies a failed layout (training only); ``quad``:
+    the config's quadrotor when already loaded (None: ``train_quad(cfg)`` reads it).
     """
     track = None if cfg.track is None else resolve_track(cfg.track)
     env_cfg = EnvConfig(
         track=track,
-        quad=train_quad(cfg),
+        quad=quad or train_quad(cfg),
         random_tracks=track is None,
         num_gates=num_gates,
         layout_difficulty=difficulty if track is None else None,
@@ -151,9 +153,11 @@ def evaluate_model(
     seed: int,
     difficulty: float | None = None,
     features: str | None = None,
+    quad: QuadParams | None = None,
 ) -> Evaluation:
-    """The deterministic policy over ``episodes`` tracks (one per drone)."""
-    env = make_train_env(cfg, episodes, num_gates, seed, difficulty, features)
+    """The deterministic policy over ``episodes`` tracks (one per drone); ``quad``: the
+    config's quadrotor when already loaded."""
+    env = make_train_env(cfg, episodes, num_gates, seed, difficulty, features, quad=quad)
     obs = env.reset()
     result: list[bool | None] = [None] * episodes
     per_gate: list[float] = []
@@ -247,7 +251,7 @@ def train_policy(
     features = run_features(cfg)
     env = make_train_env(
         cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage), features,
-        stages.layout_replay,
+        stages.layout_replay, quad,
     )  # fmt: skip
     if resume:
         try:
@@ -306,7 +310,14 @@ def train_policy(
                 n = curriculum.num_gates
                 eval_seed = seed + 10_000 + (0 if cfg.eval_same_layouts else self.num_timesteps)
                 ev = evaluate_model(
-                    model, cfg, n, cfg.eval_episodes, eval_seed, curriculum.difficulty, features
+                    model,
+                    cfg,
+                    n,
+                    cfg.eval_episodes,
+                    eval_seed,
+                    curriculum.difficulty,
+                    features,
+                    quad,
                 )
                 self.logger.record("eval/success_rate", ev.success)
                 self.logger.record("eval/score", ev.score)
