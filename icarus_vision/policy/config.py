@@ -175,6 +175,10 @@ class TrainConfig:
     """Quadrotor TOML file the policy is trained for (its dynamics, limits and camera: the
     camera-angle cost and the out-of-view rule use its camera; randomisation varies mass, thrust
     and drag around it); None: the built-in racer-500g. Race it with ``race --quad`` the same file."""
+    privileged_critic: bool = False
+    """The value network also reads the truth the policy is not given (the gate without perception
+    noise, the randomised mass, thrust, drag and motor lag, the wind, the next opening's size, the
+    gates left: ``policy/critic.py``); the actor, the only part exported, reads as before."""
     init: str | None = None
     """Start the actor from an exported policy (``default`` or a path); None: from scratch."""
     init_critic_steps: int = 0

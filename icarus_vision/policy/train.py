@@ -39,6 +39,7 @@ from icarus_vision.policy.config import (
     config_to_dict,
     load_run_config,
 )
+from icarus_vision.policy.critic import AsymmetricActorCriticPolicy, PrivilegedVecEnv
 from icarus_vision.policy.export import ExportedPolicy, export_sb3_policy, load_init_actor
 from icarus_vision.policy.features import FEATURES_V1, FEATURES_VERSIONS, FeatureVecEnv
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
@@ -94,7 +95,8 @@ def make_train_env(
     layout_replay: float = 0.0,
     quad: QuadParams | None = None,
 ):
-    """The training VecEnv stack: batched drones -> perception noise -> policy features.
+    """The training VecEnv stack: batched drones -> perception noise -> policy features
+    (-> the privileged critic's block, with ``cfg.privileged_critic``).
 
     Random tracks of ``num_gates`` gates at layout ``difficulty`` (None: classic layouts), or the
     config's fixed ``track``; ``features``: the transform (None: ``run_features(cfg)``);
@@ -114,7 +116,7 @@ def make_train_env(
         observation=cfg.observation,
         max_episode_s=cfg.max_episode_s,
     )
-    venv = BatchedRacingVecEnv(num_envs, env_cfg)
+    base = venv = BatchedRacingVecEnv(num_envs, env_cfg)
     venv.seed(seed)
     if cfg.perception.enabled:
         camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
@@ -123,7 +125,9 @@ def make_train_env(
             venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m,
             map_yaw_error_deg=cfg.perception.map_yaw_error_deg, map_share=cfg.perception.map_share,
         )  # fmt: skip
-    return FeatureVecEnv(venv, features or run_features(cfg))
+    features = features or run_features(cfg)
+    venv = FeatureVecEnv(venv, features)
+    return PrivilegedVecEnv(venv, base, features) if cfg.privileged_critic else venv
 
 
 LAP_WEIGHT = 0.1
@@ -261,8 +265,13 @@ def train_policy(
                 f"{ckpt_dir / 'last.zip'}: corrupt checkpoint ({type(e).__name__}: {e})"
             ) from None
     else:
+        policy_kwargs = {"net_arch": list(p.net_arch), "log_std_init": p.log_std_init}
+        policy_class = "MlpPolicy"
+        if cfg.privileged_critic:
+            policy_class = AsymmetricActorCriticPolicy
+            policy_kwargs["actor_dim"] = env.actor_dim
         model = PPO(
-            "MlpPolicy",
+            policy_class,
             env,
             learning_rate=p.learning_rate,
             n_steps=p.n_steps,
@@ -275,7 +284,7 @@ def train_policy(
             vf_coef=p.vf_coef,
             max_grad_norm=p.max_grad_norm,
             normalize_advantage=p.advantage_norm == "minibatch",
-            policy_kwargs={"net_arch": list(p.net_arch), "log_std_init": p.log_std_init},
+            policy_kwargs=policy_kwargs,
             tensorboard_log=str(out / "tb"),
             seed=seed,
             device="cpu",
