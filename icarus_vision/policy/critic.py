@@ -22,7 +22,7 @@ from stable_baselines3.common.torch_layers import MlpExtractor
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from torch import nn
 
-from icarus_vision.policy.features import CLIP, obs_to_features
+from icarus_vision.policy.features import CLIP, _yaw_frame, obs_to_features
 from icarus_vision.sim.quad import GRAVITY
 
 EXTRA_DIM = 10
@@ -42,37 +42,29 @@ class PrivilegedVecEnv(VecEnvWrapper):
     """Appends the true features and the episode's hidden parameters to the learner's observation.
 
     Args:
-        venv: the training stack's top (``FeatureVecEnv``): the actor's features.
-        base: the ``BatchedRacingVecEnv`` under it (its drones' states, gates, randomised
-            parameters and wind).
+        venv: the training stack's top (``FeatureVecEnv``): the actor's features; the
+            ``BatchedRacingVecEnv`` at its bottom gives the drones' states, gates, randomised
+            parameters and wind.
         version: the feature transform.
     """
 
-    def __init__(self, venv: VecEnv, base, version: str) -> None:
+    def __init__(self, venv: VecEnv, version: str) -> None:
         self.actor_dim = venv.observation_space.shape[0]
         dim = privileged_dim(self.actor_dim)
         space = gym.spaces.Box(-CLIP, CLIP, shape=(dim,), dtype=np.float32)
         super().__init__(venv, observation_space=space)
-        self.base, self.core, self.version = base, base.core, version
-        p = base.core.cfg.quad
-        self.nominal = (
-            p.mass,
-            p.thrust_max / (p.mass * GRAVITY),
-            float(np.mean(p.drag)),
-            p.motor_tau,
-        )
+        self.base = venv.unwrapped
+        self.core, self.version = self.base.core, version
+        p = self.core.cfg.quad
+        self.nominal = (p.mass, p.thrust_to_weight, float(np.mean(p.drag)), p.motor_tau)
         self.prev_extra = np.zeros((self.num_envs, EXTRA_DIM), np.float32)
 
     def extras(self, obs: np.ndarray) -> np.ndarray:
         """(N, EXTRA_DIM) hidden parameters of each drone's episode, scaled to order one."""
         c, params = self.core, self.core.params
         mass0, twr0, drag0, tau0 = self.nominal
-        rows = np.arange(c.n)
-        j = np.minimum(c.target, c.n_pass - 1)
         yaw = obs[:, 8]
-        cy, sy = np.cos(yaw), np.sin(yaw)
-        w = c.wind_const
-        wind = np.stack([cy * w[:, 0] + sy * w[:, 1], -sy * w[:, 0] + cy * w[:, 1], w[:, 2]], 1)
+        wind = _yaw_frame(c.wind_const, np.cos(yaw), np.sin(yaw))
         out = np.column_stack([
             (c.n_pass - c.target) / GATES_SCALE,
             params.mass / mass0 - 1,
@@ -80,7 +72,7 @@ class PrivilegedVecEnv(VecEnvWrapper):
             params.drag.mean(axis=1) / drag0 - 1,
             params.motor_tau / tau0 - 1,
             wind / WIND_SCALE,
-            c.g_size[rows, j] - 1.0,
+            c.target_gate()[2] - 1.0,
             np.abs(c.gust_amp).sum(axis=(1, 2)) / WIND_SCALE,
         ])  # fmt: skip
         return np.clip(out, -CLIP, CLIP).astype(np.float32)

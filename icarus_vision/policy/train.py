@@ -116,7 +116,7 @@ def make_train_env(
         observation=cfg.observation,
         max_episode_s=cfg.max_episode_s,
     )
-    base = venv = BatchedRacingVecEnv(num_envs, env_cfg)
+    venv = BatchedRacingVecEnv(num_envs, env_cfg)
     venv.seed(seed)
     if cfg.perception.enabled:
         camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
@@ -127,7 +127,7 @@ def make_train_env(
         )  # fmt: skip
     features = features or run_features(cfg)
     venv = FeatureVecEnv(venv, features)
-    return PrivilegedVecEnv(venv, base, features) if cfg.privileged_critic else venv
+    return PrivilegedVecEnv(venv, features) if cfg.privileged_critic else venv
 
 
 LAP_WEIGHT = 0.1
