@@ -91,6 +91,12 @@ class FilterConfig:
     ``center_sigma_px`` allow is not that gate, however uncertain its range. Without it the 4-D
     gate lets a small far detection (a distractor) match any gate roughly ahead, and its updates
     drag the gate away one frame at a time. inf: off."""
+    range_ratio: float = 2.0
+    """A detection is not a gate whose estimate lies more than this factor nearer or farther than
+    the detection's own range (beyond twice the estimate's spread). A detection's range is the
+    least certain part of it, so without this a small detection of a far gate fits the χ² gate of
+    a near gate on the same line of sight (a row of gates), and its update drags the near gate
+    half a metre off in the last metres of the approach. inf: off."""
     reinit_count: int = 3
     """Rejected but mutually consistent measurements that re-initialise a gate (wrong prior)."""
     reinit_window_s: float = 0.5
@@ -110,6 +116,8 @@ class FilterConfig:
             raise ValueError(f"reinit_count must be >= 2, got {self.reinit_count}")
         if not self.gate_chi2 > 0:
             raise ValueError(f"gate_chi2 must be > 0, got {self.gate_chi2}")
+        if not self.range_ratio > 1:
+            raise ValueError(f"range_ratio must be > 1, got {self.range_ratio}")
         if not self.bearing_chi2 > 0:
             raise ValueError(f"bearing_chi2 must be > 0, got {self.bearing_chi2}")
 

@@ -69,6 +69,7 @@ class GateEstimator:
         self._target_gate = -1  # map-free
         self._target_heading = 0.0
         self._last_passed = -1
+        self._side: float | None = None  # the drone's side of the next gate's plane, last check
         self._passed: set[int] = set()
         self._odom: OdometryReading | None = None
         self._latest: OdometryReading | None = None  # the newest reading (passages)
@@ -168,6 +169,15 @@ class GateEstimator:
         return float(ref + wrap_axis(axis - ref))
 
     def _check_passage(self, p0: np.ndarray, p1: np.ndarray) -> None:
+        """Count a passage when odometry goes from before the next gate's estimated plane to
+        behind it, through its opening.
+
+        The plane moves as vision corrects the gate: an update that shifts it back past the drone
+        between two checks would leave the drone behind the plane without ever crossing it, and
+        the estimator chasing a gate already flown through. So "before" is also the side of the
+        previous check, under the estimate of that moment, when the plane has moved by less than
+        half the gate's size since.
+        """
         gi = self._target_track()
         if gi < 0 or (self.config.mode == "map-aided" and self.target >= len(self.passage_gate)):
             return
@@ -175,14 +185,20 @@ class GateEstimator:
         yaw = self._heading(gi)
         n = np.array([math.cos(yaw), math.sin(yaw), 0.0])
         s0, s1 = float((p0 - tr.pos) @ n), float((p1 - tr.pos) @ n)
-        if not (s0 < 0.0 <= s1):
+        was_before = s0 < 0.0 or (
+            self._side is not None and self._side < 0.0 and s0 < 0.5 * tr.size
+        )
+        self._side = s1
+        if not (was_before and s1 >= 0.0):
             return
-        cross = p0 + (p1 - p0) * (s0 / (s0 - s1)) - tr.pos
+        frac = s0 / (s0 - s1) if s0 < 0.0 else 0.0
+        cross = p0 + (p1 - p0) * frac - tr.pos
         reach = 0.5 * tr.size * (1.0 + self.config.filter.passage_margin)
         if np.max(np.abs(cross - (cross @ n) * n)) > reach:
             return
         self.counts["passages"] += 1
         self.target += 1
+        self._side = None
         if self.config.mode == "map-free":
             self._passed.add(gi)
             self._last_passed = gi
@@ -234,6 +250,7 @@ class GateEstimator:
         if cur >= 0 and best_d > 0.7 * float(np.linalg.norm(self.tracks[cur].pos - odom.pos)):
             return
         self._target_gate = best
+        self._side = None
         d = self.tracks[best].pos - odom.pos
         axis = self.tracks[best].mean[3]
         # Face away from the drone: the passage direction points from the drone through the gate.
@@ -262,13 +279,9 @@ class GateEstimator:
         self.counts.update(f"rejected_{r}" for r in reasons if r is not None)
         if sols is None:
             return False
-        pairs, unmatched = match_detections(sols, self.tracks, size, r_wc, t_wc, self.config)
-        chosen: dict[int, GateMeasurement] = {}  # track -> its best-scoring measurement
-        for _, ti, m in sorted(pairs, key=lambda p: p[0]):
-            if ti in chosen:
-                self.counts["duplicates"] += 1
-            else:
-                chosen[ti] = m
+        pairs, unmatched, left = match_detections(sols, self.tracks, size, r_wc, t_wc, self.config)
+        self.counts["duplicates"] += left
+        chosen = {ti: m for _, ti, m in pairs}  # track -> its measurement
         if chosen:
             update_tracks([self.tracks[ti] for ti in chosen], list(chosen.values()), odom.t)
             self.counts["accepted"] += len(chosen)

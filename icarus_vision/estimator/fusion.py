@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from icarus_vision.estimator.config import EstimatorConfig, MeasurementConfig
 from icarus_vision.estimator.filter import GateTrack, batch_mahalanobis_sq, heading_spread
@@ -27,6 +28,10 @@ from icarus_vision.estimator.pnp import (
     world_pose,
 )
 from icarus_vision.gate_detect.base import GateDetection
+
+_NOT_ALLOWED = (
+    1e12  # the assignment's cost of a pair outside the gates (never chosen over one inside)
+)
 
 
 @dataclass(frozen=True)
@@ -175,33 +180,29 @@ def bearing_sq(
     return np.where(ahead, d2, np.inf)
 
 
-def _best_tracks(
+def _track_scores(
     m: FrameMeasurements, gaps: np.ndarray, means: np.ndarray, covs: np.ndarray,
     off_bearing: np.ndarray,
 ) -> tuple[np.ndarray, ...]:  # fmt: skip
-    """Each detection's best (solution slot, gate) pair: the lowest d² + cost gap.
+    """Each (detection, gate) pair's best solution slot: the lowest d² + cost gap.
 
     Args:
         gaps: (D, 2) each slot's cost minus the best slot's.
         means: (M, 4), covs: (M, 4, 4) gate tracks (of the measurements' size).
-        off_bearing: (D, 2, M) pairs outside the direction gate (:func:`bearing_sq`): their d² is
+        off_bearing: (D, 2, M) pairs outside the direction or range gates: their d² is
             infinite.
 
     Returns:
-        (D,) arrays: the score, its d², the gate (index into ``means``), the slot, and the other
-        slot's score at that gate minus the best one's.
+        (D, M) arrays: the score, its d², the slot, and the other slot's score minus the best's.
     """
     d2 = batch_mahalanobis_sq(means, covs, m.z, m.cov)  # (D, 2, M)
     d2 = np.where(off_bearing, np.inf, d2)
-    score = (d2 + gaps[..., None]).reshape(len(d2), -1)  # slot-major, as (slot, gate) pairs
-    best = score.argmin(axis=1)
-    rows = np.arange(len(d2))
-    other = (best + len(means)) % score.shape[1]  # the other slot, same gate
-    slot, gate = np.divmod(best, len(means))
-    top = score[rows, best]
+    score = d2 + gaps[..., None]
+    slot = np.argmin(score, axis=1)  # (D, M)
+    top = np.take_along_axis(score, slot[:, None], axis=1)[:, 0]
     with np.errstate(invalid="ignore"):  # inf - inf where nothing is within the gate
-        alt = score[rows, other] - top
-    return top, d2.reshape(len(d2), -1)[rows, best], gate, slot, alt
+        alt = np.take_along_axis(score, 1 - slot[:, None], axis=1)[:, 0] - top
+    return top, np.take_along_axis(d2, slot[:, None], axis=1)[:, 0], slot, alt
 
 
 def _measurement(
@@ -223,49 +224,63 @@ def match_detections(
     r_world_cam: np.ndarray,
     t_world_cam: np.ndarray,
     cfg: EstimatorConfig,
-) -> tuple[list[tuple[float, int, GateMeasurement]], list[GateMeasurement]]:
-    """Associate each solved detection with the gate track that explains it best.
+) -> tuple[list[tuple[float, int, GateMeasurement]], list[GateMeasurement], int]:
+    """Associate the frame's detections with gate tracks, at most one detection per track.
 
     Both PnP solutions are tried against every track of each gate size (Mahalanobis distance plus
-    the solution's cost gap); a detection within the χ² gate of its best track is matched to it.
-    A track whose projected direction the detection misses (``bearing_chi2``) is never its match.
+    the solution's cost gap); a pair is allowed when its d² is within the χ² gate, the
+    detection does not miss the track's projected direction (``bearing_chi2``) and its range is
+    within ``range_ratio`` of the track's (beyond twice the track's spread). Among the
+    allowed pairs the one-to-one assignment of lowest total score is taken (two gates stacked on
+    one line of sight are seen together; each detection to the gate that explains it best, one
+    at a time, would give both to one gate and leave the other unmeasured).
 
     Args:
         new_size: gate size of a measurement that fits no track, m.
 
     Returns:
-        (score, track index, measurement) of each matched detection, and the measurements of the
-        unmatched ones (for a gate of ``new_size``), both in detection order.
+        (score, track index, measurement) of each matched detection, the measurements of the
+        detections no track allows (for a gate of ``new_size``), in detection order, and how many
+        detections were allowed a track but left without one.
     """
     gaps = sol.costs - sol.costs[:, :1]
+    n_det = len(gaps)
     means = np.array([tr.mean for tr in tracks]).reshape(-1, 4)
     covs = np.array([tr.cov for tr in tracks]).reshape(-1, 4, 4)
     track_size = np.array([tr.size for tr in tracks])
     off_bearing = bearing_sq(sol, means, covs, r_world_cam, t_world_cam) > cfg.filter.bearing_chi2
+    track_range = np.linalg.norm(means[:, :3] - t_world_cam, axis=1)
+    track_spread = 2.0 * np.sqrt(np.trace(covs[:, :3, :3], axis1=1, axis2=2))
+    score = np.full((n_det, len(tracks)), np.inf)
+    slot = np.zeros((n_det, len(tracks)), int)
+    alt = np.full((n_det, len(tracks)), np.inf)
     measured: dict[float, FrameMeasurements] = {}
-    groups = []  # per gate size: its measurements and _best_tracks' results as lists
     for size in sorted(set(track_size.tolist())):
         idx = np.flatnonzero(track_size == size)
         m = measured[size] = measure_frame(sol, size, r_world_cam, t_world_cam, cfg.measurement)
-        score, d2, gate, slot, alt = _best_tracks(
-            m, gaps, means[idx], covs[idx], off_bearing[:, :, idx]
+        seen = m.distance[..., None]  # (D, 2, 1) against (M,)
+        ratio = cfg.filter.range_ratio
+        off_range = (seen > ratio * (track_range[idx] + track_spread[idx])) | (
+            seen * ratio < track_range[idx] - track_spread[idx]
         )
-        track = idx[gate]  # index into ``tracks``
-        groups.append((m, *(a.tolist() for a in (score, d2, track, slot, alt))))
-    pairs, unmatched = [], []
-    for d in range(len(gaps)):
-        best = None  # the size whose best track scores lowest (the smallest size on ties)
-        for g in groups:
-            if best is None or g[1][d] < best[1][d]:
-                best = g
-        if best is not None:
-            m, score, d2, track, slot, alt = best
-            if d2[d] <= cfg.filter.gate_chi2:
-                pairs.append((score[d], track[d], _measurement(sol, m, d, slot[d], alt[d])))
-                continue
+        top, d2, slot[:, idx], alt[:, idx] = _track_scores(
+            m, gaps, means[idx], covs[idx], off_bearing[:, :, idx] | off_range
+        )
+        score[:, idx] = np.where(d2 <= cfg.filter.gate_chi2, top, np.inf)
+    allowed = np.isfinite(score)
+    pairs = []
+    if allowed.any():
+        rows, cols = linear_sum_assignment(np.where(allowed, score, _NOT_ALLOWED))
+        for d, ti in zip(rows.tolist(), cols.tolist(), strict=True):
+            if allowed[d, ti]:
+                m = measured[float(track_size[ti])]
+                z = _measurement(sol, m, d, int(slot[d, ti]), float(alt[d, ti]))
+                pairs.append((float(score[d, ti]), ti, z))
+    unmatched = []
+    for d in np.flatnonzero(~allowed.any(axis=1)).tolist():
         if new_size not in measured:
             measured[new_size] = measure_frame(
                 sol, new_size, r_world_cam, t_world_cam, cfg.measurement
             )
         unmatched.append(_measurement(sol, measured[new_size], d, 0, float(gaps[d, 1])))
-    return pairs, unmatched
+    return pairs, unmatched, int(allowed.any(axis=1).sum()) - len(pairs)

@@ -132,6 +132,22 @@ def test_switches_gate_on_passage(two_gates):
     )
 
 
+@pytest.mark.parametrize("shift, passed", [(-0.15, True), (-0.9, False)])
+def test_a_plane_moved_back_past_the_drone_counts_as_passed(two_gates, shift, passed):
+    """Vision moves the gate between two checks so that the drone, just before the plane, is
+    now just behind it: it flies on, never crosses the plane again, and would chase a gate it
+    has flown through. A small shift counts as the passage; a jump of more than half the gate's
+    size (a re-initialised gate) does not."""
+    est = GateEstimator(CAM, EstimatorConfig(), two_gates)
+    est.predict(odom_at(0.00, (5.80, 0, 2)))
+    est.predict(odom_at(0.02, (5.95, 0, 2)))  # 5 cm before the plane
+    assert est.target == 0
+    est.tracks[est.passage_gate[0]].mean[0] += shift  # what a vision update does
+    est.predict(odom_at(0.04, (6.10, 0, 2)))
+    est.predict(odom_at(0.06, (6.25, 0, 2)))
+    assert est.target == int(passed) and est.counts["passages"] == int(passed)
+
+
 def test_a_late_image_does_not_pass_a_hairpin_gate_backwards():
     """Hairpin: the gate just passed is the next passage, the other way. An image taken before the
     passage, fused after it (latency), moves the estimator back in time through that plane: it

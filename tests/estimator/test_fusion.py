@@ -86,7 +86,7 @@ def test_each_detection_is_matched_to_its_gate():
     tracks = [GateTrack(np.array(g.pos) + 0.1, g.yaw, cov, g.size, 0.0, True) for g in gates]
     cfg = EstimatorConfig(measurement=CFG)
     sols, _ = solve_detections(dets, CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
-    pairs, unmatched = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
+    pairs, unmatched, _ = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
     assert [ti for _, ti, _ in pairs] == [2, 1, 0] and not unmatched
     for (score, _, m), gate in zip(pairs, track.gates, strict=True):
         assert 0.0 <= score < cfg.filter.gate_chi2
@@ -95,8 +95,38 @@ def test_each_detection_is_matched_to_its_gate():
     # With the gates' tracks moved away, every detection becomes an unmatched measurement.
     for tr in tracks:
         tr.mean[:3] += 3.0
-    pairs, unmatched = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
+    pairs, unmatched, _ = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
     assert not pairs and len(unmatched) == 3
+
+
+def test_two_gates_on_one_line_of_sight_are_each_measured():
+    """A split-s: two gates stacked 2 m apart. The lower gate's map is uncertain and sits between
+    them, so alone each detection fits it best; matched one at a time both would go to it and the
+    upper gate would stay unmeasured. The assignment gives each detection its own gate."""
+    od = odom_at(0.0, [0.0, 0.0, 2.0])
+    r_wc, t_wc = CAM.pose(od.pos, od.quat)
+    low, high = Gate((10.0, 0.0, 1.0)), Gate((10.0, 0.0, 3.0))
+    dets = [
+        GateDetection(CAM.project(np.asarray(g.corners()), od.pos, od.quat)[0], np.ones(4), 1.0)
+        for g in (high, low)
+    ]
+    wide = np.diag([1.5**2] * 3 + [math.radians(10.0) ** 2])
+    tight = np.diag([0.5**2] * 3 + [math.radians(10.0) ** 2])
+    tracks = [
+        GateTrack(np.array([10.0, 0.0, 2.0]), 0.0, wide, 1.0, 0.0, True),  # the lower gate's map
+        GateTrack(np.array([10.0, 0.0, 3.4]), 0.0, tight, 1.0, 0.0, True),  # the upper gate's
+    ]
+    cfg = EstimatorConfig(measurement=CFG)
+    sols, _ = solve_detections(dets, CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+    for d in dets:  # alone, each fits the lower gate's track best
+        alone, _ = solve_detections([d], CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+        best = min(match_detections(alone, tracks, 1.0, r_wc, t_wc, cfg)[0])
+        assert best[1] == 0
+    pairs, unmatched, left = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
+    assert not unmatched and left == 0
+    assert [ti for _, ti, _ in pairs] == [1, 0]  # the upper detection to the upper gate
+    for (_, _, m), gate in zip(pairs, (high, low), strict=True):
+        assert np.linalg.norm(m.pos - np.asarray(gate.pos)) < 0.1
 
 
 def test_a_plausible_second_solution_widens_only_that_measurements_heading():
@@ -129,7 +159,7 @@ def test_a_small_detection_off_the_gates_direction_is_not_that_gate():
         sols, _ = solve_detections([det], CAM.K, SIZE, r_wc, t_wc, noisy, 1.0)
         track = GateTrack(np.array(gate.pos), gate.yaw, cov, gate.size, 0.0, True)
         cfg = EstimatorConfig(measurement=noisy, filter=FilterConfig(bearing_chi2=bearing_chi2))
-        pairs, unmatched = match_detections(sols, [track], 1.0, r_wc, t_wc, cfg)
+        pairs, unmatched, _ = match_detections(sols, [track], 1.0, r_wc, t_wc, cfg)
         assert len(pairs) + len(unmatched) == 1
         return bool(pairs)
 
@@ -138,17 +168,41 @@ def test_a_small_detection_off_the_gates_direction_is_not_that_gate():
     assert not matched(60.0, 13.8) and not matched(90.0, 13.8)
 
 
+@pytest.mark.parametrize("range_ratio, near_matched", [(2.0, False), (math.inf, True)])
+def test_a_far_gates_detection_is_not_the_near_gate_on_its_line_of_sight(range_ratio, near_matched):
+    """A row of gates: the far one (15 m) is seen just above the near one (5 m). With the CNN's
+    noise its range is so uncertain that it fits the near gate's χ² and direction gates; the
+    range gate (its range three times the near gate's) turns it away."""
+    od = odom_at(0.0, [0.0, 0.0, 2.0])
+    r_wc, t_wc = CAM.pose(od.pos, od.quat)
+    far = Gate((15.0, 0.0, 2.4))
+    det = GateDetection(CAM.project(np.asarray(far.corners()), od.pos, od.quat)[0], np.ones(4), 0.9)
+    noisy = MeasurementConfig(pixel_sigma=12.0, range_inflation_m=10.0)
+    cov = np.diag([0.3**2] * 3 + [math.radians(10.0) ** 2])
+    near = GateTrack(np.array([5.0, 0.0, 2.0]), 0.0, cov, 1.0, 0.0, True)
+    cfg = EstimatorConfig(measurement=noisy, filter=FilterConfig(range_ratio=range_ratio))
+    sols, _ = solve_detections([det], CAM.K, SIZE, r_wc, t_wc, noisy, 1.0)
+    pairs, unmatched, _ = match_detections(sols, [near], 1.0, r_wc, t_wc, cfg)
+    assert bool(pairs) == near_matched and len(pairs) + len(unmatched) == 1
+    # Its own gate, where the map puts it, still takes it.
+    own = GateTrack(np.array(far.pos), 0.0, cov, 1.0, 0.0, True)
+    pairs, _, _ = match_detections(sols, [near, own], 1.0, r_wc, t_wc, cfg)
+    assert [ti for _, ti, _ in pairs] == [1]
+
+
 def test_a_gate_behind_the_camera_matches_nothing():
     _, dets, r_wc, t_wc = _view()
     cov = np.diag([0.3**2] * 3 + [math.radians(10.0) ** 2])
     behind = GateTrack(np.array([-5.0, 0.0, 2.0]), 0.0, cov * 1e4, 1.0, 0.0, True)
     sols, _ = solve_detections(dets, CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
-    pairs, unmatched = match_detections(sols, [behind], 1.0, r_wc, t_wc, EstimatorConfig())
+    pairs, unmatched, _ = match_detections(sols, [behind], 1.0, r_wc, t_wc, EstimatorConfig())
     assert not pairs and len(unmatched) == len(dets)
 
 
 def test_the_direction_gate_settings_are_checked():
     with pytest.raises(ValueError, match="bearing_chi2"):
         FilterConfig(bearing_chi2=0.0)
+    with pytest.raises(ValueError, match="range_ratio"):
+        FilterConfig(range_ratio=1.0)
     with pytest.raises(ValueError, match="center_sigma_px"):
         MeasurementConfig(center_sigma_px=-1.0)
