@@ -2,10 +2,11 @@
 
 Each camera frame, every detection is checked (degenerate corners are rejected and counted), solved
 by square PnP (both solutions kept), expressed in the odometry world frame through the camera mount
-and the odometry pose, and associated with the gate track that explains it best (Mahalanobis
-distance, the two PnP solutions both tried); the winner updates that gate's Kalman filter. Between
-frames the filters only grow their covariance. The next gate is switched when odometry crosses its
-estimated plane through its opening.
+and the odometry pose, and the frame's detections are matched one-to-one to the gate tracks
+(least total Mahalanobis distance, the two PnP solutions both tried, within the χ², direction and
+range gates); each match updates that gate's Kalman filter. Between frames the filters only grow
+their covariance. The next gate is switched when odometry crosses its estimated plane through its
+opening (or vision moves the plane back past the drone).
 
 * **map-aided**: one gate track per physical gate of a prior map (which may be displaced from the
   real gates); the next gate is the next passage of the map. Detections that fit no gate are

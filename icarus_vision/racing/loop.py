@@ -39,6 +39,10 @@ class LoopRecord:
     frames: int = 0
     detected: int = 0
     rel_err: list[float] = field(default_factory=list)
+    gate_dist: list[float] = field(default_factory=list)
+    """Per camera frame (not the oracle): true distance to the next gate, m."""
+    target_ok: list[bool] = field(default_factory=list)
+    """Per camera frame (not the oracle): whether the estimator's next gate is the true one."""
     video: list[np.ndarray] = field(default_factory=list)
     info: dict = field(default_factory=dict)
 
@@ -87,7 +91,8 @@ def observation_from(od, rel_world: np.ndarray, extra: np.ndarray | None = None)
 
 def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Camera, scene, seed: int,
              prior: Track, latency_frames: int = 1, on_frame=None,
-             estimator: EstimatorConfig | None = None, look: Visuals | None = None) -> LoopRecord:  # fmt: skip
+             estimator: EstimatorConfig | None = None, look: Visuals | None = None,
+             open_loop: bool = False) -> LoopRecord:  # fmt: skip
     """Fly one episode of a single-drone env (already reset) with perception in the loop.
 
     Args:
@@ -102,6 +107,9 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
         estimator: estimator configuration (noise model of the detector, filter gates).
         look: the drawn look of the world (``scene`` built with its style and distractors): its
             light renders every frame and its sensor effects degrade it.
+        open_loop: the pilot flies on the true observation (as with the oracle) while camera,
+            detector and estimator run alongside and are recorded: every perception variant then
+            sees the same flight and the same images.
     """
     core = env.unwrapped.core
     oracle = isinstance(detector, str) and parse_spec(detector)[0] == "oracle"
@@ -137,13 +145,16 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
                 rec.frames += 1
                 rec.detected += bool(dets)
                 rec.rel_err.append(float(np.linalg.norm(per.estimate.rel_world - rel_true)))
+                rec.gate_dist.append(float(np.linalg.norm(rel_true)))
+                rec.target_ok.append(int(per.estimate.target) == int(core.target[0]))
                 if on_frame is not None:
                     on_frame(rgb, dets, per.estimate, state)
             else:
                 per.step(od)
             extra = extra_from_estimate(per.estimate, per.estimator, od, obs_dim)
-            obs = observation_from(od, per.estimate.rel_world, extra)
-        gate_yaw = float(core.target_gate()[1][0]) if oracle else per.estimate.yaw
+            obs = truth_obs if open_loop else observation_from(od, per.estimate.rel_world, extra)
+        on_truth = oracle or open_loop
+        gate_yaw = float(core.target_gate()[1][0]) if on_truth else per.estimate.yaw
         obs_full, _, term, trunc, info = env.step(pilot(obs, gate_yaw))
         truth_obs = obs_full
         rec.t.append(float(core.t[0]))

@@ -17,7 +17,7 @@ from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.policy.export import ExportedPolicy
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.scripted import ScriptedController
-from icarus_vision.racing.loop import fly_loop
+from icarus_vision.racing.loop import LoopRecord, fly_loop
 from icarus_vision.racing.report import validate_report
 from icarus_vision.racing.warmup import warm_up
 from icarus_vision.render.camera import Camera
@@ -59,6 +59,7 @@ class RaceResult:
         track: the track as flown (after randomisation).
         video: list of RGB frames at the camera rate (empty unless asked for).
         ghost: the cached time-optimal plan as (t (M,) s, pos (M, 3)), or None.
+        loop: the loop's per-frame record (perception error, true gate distance, target agreement).
     """
 
     report: dict
@@ -68,6 +69,7 @@ class RaceResult:
     track: Track
     video: list
     ghost: tuple[np.ndarray, np.ndarray] | None = None
+    loop: LoopRecord | None = None
 
 
 def _pilot(policy: ExportedPolicy | str, quad: QuadParams):
@@ -90,6 +92,7 @@ def run_race(
     latency_frames: int = 1,
     video: bool = False,
     recipe: str | None = "gates-v1",
+    open_loop: bool = False,
 ) -> RaceResult:
     """Fly ``track`` once with camera, detector, estimator and pilot in the loop.
 
@@ -107,6 +110,8 @@ def run_race(
             the quadrotor file's: the estimator knows it). None: the default look.
         latency_frames: camera frames between an image and its detections reaching the estimator.
         video: keep composed video frames (FPV with detections beside a top view).
+        open_loop: the pilot flies on the truth while camera, detector and estimator run and are
+            recorded (``RaceResult.loop``): perception measured on the oracle's flight.
     """
     check_backend(backend)
     if latency_frames < 0:
@@ -164,7 +169,7 @@ def run_race(
 
         rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector_obj or detector, camera=camera,
                        scene=scene, seed=seed, prior=base, latency_frames=latency_frames, on_frame=on_frame,
-                       estimator=config_for_detector(det_name), look=look)  # fmt: skip
+                       estimator=config_for_detector(det_name), look=look, open_loop=open_loop)  # fmt: skip
     finally:
         env.close()
         if scene is not None:
@@ -206,4 +211,4 @@ def run_race(
     validate_report(report)
     pos = np.array([np.asarray(flown.start_pos), *rec.pos])
     t = np.array([0.0, *rec.t])
-    return RaceResult(report, t, pos, speeds, flown, frames, ghost)
+    return RaceResult(report, t, pos, speeds, flown, frames, ghost, rec)

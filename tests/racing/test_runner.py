@@ -99,3 +99,19 @@ def test_randomize_draws_the_worlds_look_from_the_recipe():
     assert r["finished"] and r["perception"]["detection_rate"] > 0
     r = run_race("single-gate", seed=4, randomize=True, recipe="gates-v3").report
     assert r["perception"]["frames"] > 10
+
+
+def test_open_loop_flies_the_oracles_flight_and_records_the_estimate():
+    """Open loop: the pilot reads the truth, so the flight is the oracle's to the step, while the
+    camera, detector and estimator run alongside and record their error each frame."""
+    kw = {"policy": "default", "seed": 3, "randomize": True}
+    truth = run_race("single-gate", detector="oracle", **kw)
+    seen = run_race("single-gate", detector="opencv", open_loop=True, **kw)
+    np.testing.assert_array_equal(seen.pos, truth.pos)
+    rec = seen.loop
+    assert (
+        rec.frames > 10
+        and len(rec.rel_err) == len(rec.gate_dist) == len(rec.target_ok) == rec.frames
+    )
+    assert all(rec.target_ok[:5]) and rec.gate_dist[0] > rec.gate_dist[5]  # flying at the gate
+    assert seen.report["perception"]["detection_rate"] is not None
