@@ -29,9 +29,8 @@ from icarus_vision.estimator.pnp import (
 )
 from icarus_vision.gate_detect.base import GateDetection
 
-_NOT_ALLOWED = (
-    1e12  # the assignment's cost of a pair outside the gates (never chosen over one inside)
-)
+# The assignment's cost of a pair outside the gates (never chosen over one inside).
+_NOT_ALLOWED = 1e12
 
 
 @dataclass(frozen=True)
@@ -182,21 +181,20 @@ def bearing_sq(
 
 def _track_scores(
     m: FrameMeasurements, gaps: np.ndarray, means: np.ndarray, covs: np.ndarray,
-    off_bearing: np.ndarray,
+    excluded: np.ndarray,
 ) -> tuple[np.ndarray, ...]:  # fmt: skip
     """Each (detection, gate) pair's best solution slot: the lowest d² + cost gap.
 
     Args:
         gaps: (D, 2) each slot's cost minus the best slot's.
         means: (M, 4), covs: (M, 4, 4) gate tracks (of the measurements' size).
-        off_bearing: (D, 2, M) pairs outside the direction or range gates: their d² is
-            infinite.
+        excluded: (D, 2, M) pairs outside the direction or range gates: their d² is infinite.
 
     Returns:
         (D, M) arrays: the score, its d², the slot, and the other slot's score minus the best's.
     """
     d2 = batch_mahalanobis_sq(means, covs, m.z, m.cov)  # (D, 2, M)
-    d2 = np.where(off_bearing, np.inf, d2)
+    d2 = np.where(excluded, np.inf, d2)
     score = d2 + gaps[..., None]
     slot = np.argmin(score, axis=1)  # (D, M)
     top = np.take_along_axis(score, slot[:, None], axis=1)[:, 0]
@@ -251,6 +249,7 @@ def match_detections(
     off_bearing = bearing_sq(sol, means, covs, r_world_cam, t_world_cam) > cfg.filter.bearing_chi2
     track_range = np.linalg.norm(means[:, :3] - t_world_cam, axis=1)
     track_spread = 2.0 * np.sqrt(np.trace(covs[:, :3, :3], axis1=1, axis2=2))
+    ratio = cfg.filter.range_ratio
     score = np.full((n_det, len(tracks)), np.inf)
     slot = np.zeros((n_det, len(tracks)), int)
     alt = np.full((n_det, len(tracks)), np.inf)
@@ -259,7 +258,6 @@ def match_detections(
         idx = np.flatnonzero(track_size == size)
         m = measured[size] = measure_frame(sol, size, r_world_cam, t_world_cam, cfg.measurement)
         seen = m.distance[..., None]  # (D, 2, 1) against (M,)
-        ratio = cfg.filter.range_ratio
         off_range = (seen > ratio * (track_range[idx] + track_spread[idx])) | (
             seen * ratio < track_range[idx] - track_spread[idx]
         )

@@ -151,8 +151,11 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
                     on_frame(rgb, dets, per.estimate, state)
             else:
                 per.step(od)
-            extra = extra_from_estimate(per.estimate, per.estimator, od, obs_dim)
-            obs = truth_obs if open_loop else observation_from(od, per.estimate.rel_world, extra)
+            if open_loop:
+                obs = truth_obs
+            else:
+                extra = extra_from_estimate(per.estimate, per.estimator, od, obs_dim)
+                obs = observation_from(od, per.estimate.rel_world, extra)
         on_truth = oracle or open_loop
         gate_yaw = float(core.target_gate()[1][0]) if on_truth else per.estimate.yaw
         obs_full, _, term, trunc, info = env.step(pilot(obs, gate_yaw))
