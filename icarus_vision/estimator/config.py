@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 MODES = ("map-aided", "map-free")
@@ -50,8 +51,12 @@ class MeasurementConfig:
     """Smallest mean side of the corner quadrilateral accepted, pixels."""
     min_area_ratio: float = 0.05
     """Smallest area of any corner triangle relative to the quadrilateral's area (collinearity)."""
-    image_margin_px: float = 0.5
-    """How far outside the image a corner may lie before the detection is rejected, pixels."""
+    image_margin_px: float = 0.0
+    """How far outside the image (which spans -0.5 to W - 0.5 px) a corner may lie before the
+    detection is rejected, pixels. 0: every corner in the image. A gate cut by the frame's edge
+    gets corners on the edge or just past it where the bar leaves the image, not where its corners
+    are: one such 18 px detection, taken for a gate 6 m ahead, moved it 1.5 m (2026-12-06; 0.5 px
+    before)."""
     max_range_m: float = 40.0
     """Detections solved farther than this are rejected, m."""
     tilt_sigma_deg: float = 10.0
@@ -101,6 +106,12 @@ class FilterConfig:
     """Rejected but mutually consistent measurements that re-initialise a gate (wrong prior)."""
     reinit_window_s: float = 0.5
     """Time window in which those rejected measurements must fall, s."""
+    reinit_vote: float = 2.0
+    """A gate is re-initialised only if those rejected measurements outnumber this many times the
+    measurements it accepted in the same window. A gate that vision confirms frame after frame is
+    not moved by a persistent false detection beside it, and a gate that one bad detection moved
+    (a single accepted hit) is moved back by the good ones it then rejects. 0 would ignore its
+    hits; the rule until 2026-12-06 moved a gate only when it had none in the window."""
     reinit_radius_m: float = 3.0
     """A re-initialised gate may move at most this far from its previous estimate, m."""
     passage_margin: float = 1.0
@@ -112,6 +123,8 @@ class FilterConfig:
     """Map-free: updates before a newly seen gate may become the target."""
 
     def __post_init__(self) -> None:
+        if not 0 <= self.reinit_vote < math.inf:
+            raise ValueError(f"reinit_vote must be >= 0, got {self.reinit_vote}")
         if self.reinit_count < 2:
             raise ValueError(f"reinit_count must be >= 2, got {self.reinit_count}")
         if not self.gate_chi2 > 0:

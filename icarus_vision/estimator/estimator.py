@@ -325,13 +325,13 @@ class GateEstimator:
             return
         dists = [float(np.linalg.norm(tr.pos - m.pos)) for tr in self.tracks]
         ti = int(np.argmin(dists))
-        # Only a gate that vision has not confirmed lately, though the map puts it in view, is
-        # moved: a persistent false detection next to a gate that is being measured well, or
-        # next to one the camera cannot see (just flown through, behind or beside the drone),
-        # stays an outlier.
+        # Only a gate that vision has confirmed less often than it has contradicted it lately,
+        # though the map puts it in view, is moved: a persistent false detection next to a gate
+        # that is being measured well, or next to one the camera cannot see (just flown through,
+        # behind or beside the drone), stays an outlier.
         if (
             dists[ti] <= fc.reinit_radius_m
-            and t - self.tracks[ti].last_hit_t > fc.reinit_window_s
+            and len(agree) > fc.reinit_vote * self.tracks[ti].hits_since(t - fc.reinit_window_s)
             and self._in_view(self.tracks[ti], r_wc, t_wc)
         ):
             self.tracks[ti].reinit(m, t)

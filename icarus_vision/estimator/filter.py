@@ -8,6 +8,7 @@ same from both sides), so its innovation is wrapped modulo π.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -96,6 +97,11 @@ def heading_spread(yaw: float, alt_yaw: float, gap: float) -> float:
     return 0.0 if spread < 1e-8 else spread
 
 
+RECENT_HITS = 32
+"""Accepted measurements a track remembers the times of (more than a re-initialisation window
+holds at the camera's rate)."""
+
+
 class GateTrack:
     """The filtered estimate of one physical gate.
 
@@ -105,6 +111,7 @@ class GateTrack:
         size: side of the opening, m.
         hits: accepted measurements so far.
         last_hit_t: time of the last accepted measurement, s (-inf if none).
+        hit_times: times of the last accepted measurements (at most ``RECENT_HITS``), s.
         created_t: time the track was created, s.
         from_map: initialised from the prior map (map-aided) rather than from vision.
     """
@@ -123,6 +130,7 @@ class GateTrack:
         self.size = float(size)
         self.hits = 0
         self.last_hit_t = -math.inf
+        self.hit_times: deque[float] = deque(maxlen=RECENT_HITS)
         self.created_t = float(t)
         self.from_map = from_map
 
@@ -145,11 +153,20 @@ class GateTrack:
         update_tracks([self], [z], t)
 
     def reinit(self, z: GateMeasurement, t: float) -> None:
-        """Restart from a measurement (the prior was wrong)."""
+        """Restart from a measurement (the prior was wrong): the hits before no longer count."""
         self.mean = np.array([*z.pos, float(wrap_axis(z.yaw))])
         self.cov = z.cov.copy()
+        self.hit_times.clear()
+        self._hit(t)
+
+    def _hit(self, t: float) -> None:
         self.hits += 1
         self.last_hit_t = t
+        self.hit_times.append(t)
+
+    def hits_since(self, t0: float) -> int:
+        """Accepted measurements at or after ``t0`` (counted among the last ``RECENT_HITS``)."""
+        return sum(h >= t0 for h in self.hit_times)
 
 
 def update_tracks(tracks: list[GateTrack], zs: list[GateMeasurement], t: float) -> None:
@@ -164,5 +181,4 @@ def update_tracks(tracks: list[GateTrack], zs: list[GateMeasurement], t: float) 
     )
     for tr, mean, cov in zip(tracks, means, covs, strict=True):
         tr.mean, tr.cov = mean, cov
-        tr.hits += 1
-        tr.last_hit_t = t
+        tr._hit(t)

@@ -102,6 +102,27 @@ def test_a_gate_out_of_view_is_not_moved_to_a_persistent_false_detection(two_gat
         assert est.counts["reinit"] == 0 and moved < 0.05
 
 
+@pytest.mark.parametrize("vote", [2.0, 0.0])
+def test_a_gate_one_bad_detection_moved_is_moved_back_by_the_good_ones(two_gates, vote):
+    """One accepted bad detection (a gate cut by the image's edge, say) puts gate 0, not seen
+    before, 1.2 m off with a confident covariance; the good detections that follow are outliers
+    to it. They soon outnumber its one hit, so it is re-initialised to them within a few frames,
+    not only once the bad hit has left the window (0.5 s). The vote off (0): a hit never blocks."""
+    from icarus_vision.estimator.config import FilterConfig
+    from icarus_vision.estimator.pnp import GateMeasurement
+
+    est = GateEstimator(CAM, EstimatorConfig(filter=FilterConfig(reinit_vote=vote)), two_gates)
+    oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+    bad = GateMeasurement(
+        np.array([6.0, 1.2, 2.0]), 0.0, np.diag([1e-2, 1e-2, 1e-2, 1e-3]), 6.0, 0.0
+    )
+    est.tracks[0].reinit(bad, 0.0)
+    res = _fly(est, oracle, 1.0 / RATE, 0.25, 0.0, 0.5)
+    x = 0.5 * (res[-1].t - 1.0 / RATE) / (0.25 - 1.0 / RATE)
+    assert est.counts["reinit"] == 1 and est.counts["outliers"] <= 4
+    assert np.linalg.norm(res[-1].rel_world - _truth_rel(two_gates.gates[0], x)) < 0.1
+
+
 def test_survives_a_second_without_detections(two_gates):
     est = GateEstimator(CAM, EstimatorConfig(), displaced_map(two_gates, 0.2, 3.0, seed=1))
     oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)

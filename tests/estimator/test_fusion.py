@@ -206,3 +206,6 @@ def test_the_direction_gate_settings_are_checked():
         FilterConfig(range_ratio=1.0)
     with pytest.raises(ValueError, match="center_sigma_px"):
         MeasurementConfig(center_sigma_px=-1.0)
+    for vote in (-1.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match="reinit_vote"):
+            FilterConfig(reinit_vote=vote)

@@ -121,6 +121,9 @@ def test_ambiguity_resolved_for_oblique_views(yaw_deg):
         ([[100, 100], [150, np.inf], [150, 150], [100, 150]], "non_finite"),
         ([[100, 100], [400, 100], [400, 150], [100, 150]], "outside_image"),
         ([[-5, 100], [150, 100], [150, 150], [-5, 150]], "outside_image"),
+        # cut by the top edge: two corners just past it (the image starts at -0.5)
+        ([[154, -0.4], [163, -0.8], [157, 28], [150, 26]], "outside_image"),
+        ([[100, -0.4], [150, -0.4], [150, 50], [100, 50]], None),
         ([[100, 100], [101, 100], [101, 101], [100, 101]], "too_small"),
         ([[100, 100], [150, 100], [200, 100], [250, 100]], "degenerate"),  # collinear
         ([[100, 100], [150, 150], [150, 100], [100, 150]], "degenerate"),  # crossed
