@@ -157,9 +157,10 @@ class GateTrack:
         self.mean = np.array([*z.pos, float(wrap_axis(z.yaw))])
         self.cov = z.cov.copy()
         self.hit_times.clear()
-        self._hit(t)
+        self.record_hit(t)
 
-    def _hit(self, t: float) -> None:
+    def record_hit(self, t: float) -> None:
+        """Count an accepted measurement at time ``t``."""
         self.hits += 1
         self.last_hit_t = t
         self.hit_times.append(t)
@@ -181,4 +182,4 @@ def update_tracks(tracks: list[GateTrack], zs: list[GateMeasurement], t: float) 
     )
     for tr, mean, cov in zip(tracks, means, covs, strict=True):
         tr.mean, tr.cov = mean, cov
-        tr._hit(t)
+        tr.record_hit(t)
