@@ -55,8 +55,8 @@ class MeasurementConfig:
     """How far outside the image (which spans -0.5 to W - 0.5 px) a corner may lie before the
     detection is rejected, pixels. 0: every corner in the image. A gate cut by the frame's edge
     gets corners on the edge or just past it where the bar leaves the image, not where its corners
-    are: one such 18 px detection, taken for a gate two passages ahead, moved it 1.5 m (2026-12-06; 0.5 px
-    before)."""
+    are: one such 18 px detection, taken for a gate two passages ahead, moved it 1.5 m
+    (2026-12-06; 0.5 px before)."""
     max_range_m: float = 40.0
     """Detections solved farther than this are rejected, m."""
     tilt_sigma_deg: float = 10.0
