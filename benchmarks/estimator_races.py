@@ -20,17 +20,13 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
+from race_policy import vision_race  # benchmarks/, on the path when run as a script
 
 from icarus_vision.fileio import atomic_write_json
-from icarus_vision.racing.runner import run_race
-from icarus_vision.sim.race_layouts import race_track
-
-SEED0 = 100
 
 
 def fly(i: int, detector: str, policy: str) -> dict:
-    res = run_race(race_track(10, 3000 + i, difficulty=1.0), detector=detector, policy=policy,
-                   seed=SEED0 + i, randomize=True, recipe="gates-v1", open_loop=True)  # fmt: skip
+    res = vision_race(i, detector, policy, open_loop=True)
     rec = res.loop
     return {"dist": rec.gate_dist, "err": rec.rel_err, "ok": rec.target_ok,
             "finished": res.report["finished"]}  # fmt: skip

@@ -26,7 +26,7 @@ import statistics
 import time
 
 from icarus_vision.fileio import atomic_write_json
-from icarus_vision.racing.runner import run_race
+from icarus_vision.racing.runner import RaceResult, run_race
 from icarus_vision.sim.builtin import BUILTIN_TRACKS
 from icarus_vision.sim.race_layouts import race_track
 
@@ -87,24 +87,22 @@ def specialists(
     return out
 
 
+def vision_race(
+    i: int, detector: str, policy: str, difficulty: float = 1.0,
+    recipe: str | None = "gates-v1", open_loop: bool = False,
+) -> RaceResult:  # fmt: skip
+    """The race loop's ``i``-th race: layout ``race_track(10, 3000 + i)``, seed 100 + i,
+    randomised (also flown open loop by ``estimator_races.py``)."""
+    return run_race(race_track(10, 3000 + i, difficulty=difficulty), detector=detector, policy=policy,
+                    seed=SEED0 + i, randomize=True, recipe=recipe, open_loop=open_loop)  # fmt: skip
+
+
 def vision(
     tracks: int, difficulty: float, policy: str = "default", recipe: str | None = "gates-v1"
 ) -> dict:
     out = {}
     for det in ("oracle", "cnn"):
-        reports = []
-        for i in range(tracks):
-            track = race_track(10, 3000 + i, difficulty=difficulty)
-            reports.append(
-                run_race(
-                    track,
-                    detector=det,
-                    policy=policy,
-                    seed=SEED0 + i,
-                    randomize=True,
-                    recipe=recipe,
-                ).report
-            )
+        reports = [vision_race(i, det, policy, difficulty, recipe).report for i in range(tracks)]
         out[det] = _summary(reports)
         print(det, out[det], flush=True)
     out["gap_points"] = round(100 * (out["oracle"]["finish_rate"] - out["cnn"]["finish_rate"]), 1)
