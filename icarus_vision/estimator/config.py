@@ -57,6 +57,11 @@ class MeasurementConfig:
     gets corners on the edge or just past it where the bar leaves the image, not where its corners
     are: one such 18 px detection, taken for a gate two passages ahead, moved it 1.5 m
     (2026-12-06; 0.5 px before)."""
+    min_height_m: float = 0.25
+    """A measurement whose gate centre lies lower than this above the ground (z = 0 of the
+    odometry frame, where the race starts) is no gate: a gate's centre stands at least half its
+    side above the floor. Such reads come from the floor (a reflection, a shadow) and, taken as
+    consistent outliers, once re-initialised a gate 1.6 m below where it stood. -inf: off."""
     max_range_m: float = 40.0
     """Detections solved farther than this are rejected, m."""
     tilt_sigma_deg: float = 10.0
@@ -145,6 +150,12 @@ class EstimatorConfig:
     """Map-aided: trusted error of the prior map's gate positions, per axis, m."""
     map_yaw_sigma_deg: float = 10.0
     """Map-aided: trusted error of the prior map's gate headings, degrees."""
+    map_yaw_limit_sigmas: float = 3.0
+    """Map-aided: a gate's passage heading (the plane a passage is counted on, the heading the
+    pilot reads) departs from the map's by at most this many ``map_yaw_sigma_deg``, however the
+    filter's heading has turned: seen steeply from below, PnP's two-fold ambiguity can hold the
+    wrong solution frame after frame, and a plane turned 64° from the map was never crossed by a
+    drone flying through the gate. inf: off."""
     gate_size: float = 1.0
     """Map-free: side of the gates' square opening, m (map-aided takes each gate's own size)."""
     measurement: MeasurementConfig = field(default_factory=MeasurementConfig)
@@ -159,6 +170,8 @@ class EstimatorConfig:
             )
         if not (self.map_sigma_m > 0 and self.map_yaw_sigma_deg > 0 and self.gate_size > 0):
             raise ValueError("map_sigma_m, map_yaw_sigma_deg and gate_size must be > 0")
+        if not self.map_yaw_limit_sigmas > 0:
+            raise ValueError(f"map_yaw_limit_sigmas must be > 0, got {self.map_yaw_limit_sigmas}")
 
 
 DETECTOR_PIXEL_SIGMA = {"cnn": 12.0, "opencv": 1.5}

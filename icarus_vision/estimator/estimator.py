@@ -159,15 +159,18 @@ class GateEstimator:
 
     def _heading(self, gate: int, ref: float | None = None) -> float:
         """Passage heading of a gate track: its axis turned toward the expected direction ``ref``
-        (default: the target passage's)."""
+        (default: the target passage's); map-aided, within ``map_yaw_limit_sigmas`` of it."""
         if ref is None:
             ref = (
                 self.passage_yaw[min(self.target, len(self.passage_yaw) - 1)]
                 if self.config.mode == "map-aided"
                 else self._target_heading
             )
-        axis = self.tracks[gate].mean[3]
-        return float(ref + wrap_axis(axis - ref))
+        turn = wrap_axis(self.tracks[gate].mean[3] - ref)
+        if self.config.mode == "map-aided":
+            limit = math.radians(self.config.map_yaw_sigma_deg * self.config.map_yaw_limit_sigmas)
+            turn = min(max(turn, -limit), limit)
+        return float(ref + turn)
 
     def _check_passage(self, p0: np.ndarray, p1: np.ndarray) -> None:
         """Count a passage when odometry goes from before the next gate's estimated plane to
@@ -282,6 +285,7 @@ class GateEstimator:
             return False
         pairs, unmatched, left = match_detections(sols, self.tracks, size, r_wc, t_wc, self.config)
         self.counts["duplicates"] += left
+        self.counts["below_ground"] += len(sols.distance) - len(pairs) - len(unmatched) - left
         chosen = {ti: m for _, ti, m in pairs}  # track -> its measurement
         if chosen:
             update_tracks([self.tracks[ti] for ti in chosen], list(chosen.values()), odom.t)

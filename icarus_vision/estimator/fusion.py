@@ -238,8 +238,9 @@ def match_detections(
 
     Returns:
         (score, track index, measurement) of each matched detection, the measurements of the
-        detections no track allows (for a gate of ``new_size``), in detection order, and how many
-        detections were allowed a track but left without one.
+        detections no track allows (for a gate of ``new_size``; none whose centre is below
+        ``MeasurementConfig.min_height_m``), in detection order, and how many detections were
+        allowed a track but left without one.
     """
     gaps = sol.costs - sol.costs[:, :1]
     n_det = len(gaps)
@@ -261,6 +262,7 @@ def match_detections(
         off_range = (seen > ratio * (track_range[idx] + track_spread[idx])) | (
             seen * ratio < track_range[idx] - track_spread[idx]
         )
+        off_range |= (m.z[:, :, 2] < cfg.measurement.min_height_m)[..., None]  # below the floor
         top, d2, slot[:, idx], alt[:, idx] = _track_scores(
             m, gaps, means[idx], covs[idx], off_bearing[:, :, idx] | off_range
         )
@@ -280,5 +282,6 @@ def match_detections(
             measured[new_size] = measure_frame(
                 sol, new_size, r_world_cam, t_world_cam, cfg.measurement
             )
-        unmatched.append(_measurement(sol, measured[new_size], d, 0, float(gaps[d, 1])))
+        if measured[new_size].z[d, 0, 2] >= cfg.measurement.min_height_m:
+            unmatched.append(_measurement(sol, measured[new_size], d, 0, float(gaps[d, 1])))
     return pairs, unmatched, int(allowed.any(axis=1).sum()) - len(pairs)

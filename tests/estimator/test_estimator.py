@@ -282,3 +282,22 @@ def test_racing_observation_slots_come_from_the_map():
     np.testing.assert_allclose(
         extra_from_estimate(est0, free, od, 25)[7:], extra_from_estimate(est0, free, od, 25)[:3]
     )
+
+
+@pytest.mark.parametrize("limit, passed", [(3.0, True), (np.inf, False)])
+def test_the_passage_heading_stays_near_the_maps(limit, passed):
+    """A gate whose filtered heading has turned 70° from the map's (PnP's ambiguity held the wrong
+    solution): its passage plane stays within 3 σ of the map's heading, so a drone flying through
+    the opening at 25° off the map's heading is counted through it; unlimited, that plane is
+    crossed backwards and the passage is never counted."""
+    track = Track("one", (Gate((6.0, 0.0, 2.0)), Gate((14.0, -4.0, 2.0))))
+    est = GateEstimator(CAM, EstimatorConfig(map_yaw_limit_sigmas=limit), track)
+    est.tracks[0].mean[3] = np.radians(70.0)
+    yaw = np.radians(-25.0)
+    for s in np.linspace(-6.0, 3.0, 60):
+        pos = [6.0 + s * np.cos(yaw), s * np.sin(yaw), 2.0]
+        e = est.predict(odom_at(1.0 + s, pos, yaw=float(yaw)))
+        if s < -1.0:
+            heading = np.degrees(e.yaw)
+            assert heading == pytest.approx(30.0 if np.isfinite(limit) else 70.0, abs=1e-6)
+    assert (est.target == 1) == passed

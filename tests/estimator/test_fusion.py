@@ -209,3 +209,22 @@ def test_the_direction_gate_settings_are_checked():
     for vote in (-1.0, math.inf, math.nan):
         with pytest.raises(ValueError, match="reinit_vote"):
             FilterConfig(reinit_vote=vote)
+
+
+def test_a_gate_below_the_floor_is_no_measurement():
+    """A read whose gate centre would stand below ``min_height_m`` (a reflection on the floor, a
+    shadow) matches no gate and is no outlier that could re-initialise one."""
+    od = odom_at(0.0, [0.0, 0.0, 1.0])
+    r_wc, t_wc = CAM.pose(od.pos, od.quat)
+    low = Gate((6.0, 0.0, 0.1))
+    det = GateDetection(CAM.project(np.asarray(low.corners()), od.pos, od.quat)[0], np.ones(4), 1.0)
+    cov = np.diag([0.5**2] * 3 + [math.radians(10.0) ** 2])
+    tracks = [GateTrack(np.array([6.0, 0.0, 0.4]), 0.0, cov, 1.0, 0.0, True)]
+    for floor, matched in ((0.25, 0), (-math.inf, 1)):
+        m_cfg = MeasurementConfig(pixel_sigma=2.0, min_height_m=floor)
+        cfg = EstimatorConfig(measurement=m_cfg)
+        sols, _ = solve_detections([det], CAM.K, SIZE, r_wc, t_wc, m_cfg, 1.0)
+        pairs, unmatched, _ = match_detections(sols, tracks, 1.0, r_wc, t_wc, cfg)
+        assert len(pairs) == matched and not unmatched
+        far = [GateTrack(np.array([6.0, 5.0, 3.0]), 0.0, cov, 1.0, 0.0, True)]
+        assert len(match_detections(sols, far, 1.0, r_wc, t_wc, cfg)[1]) == matched
