@@ -43,6 +43,11 @@ class MeasurementConfig:
     """Distance at which a measurement's covariance is doubled (it grows by (distance / this)²):
     a detector whose errors persist from frame to frame, as a CNN's do on far gates, would otherwise
     be averaged into a confident error by a filter that takes frames as independent. inf: off."""
+    heading_correlation: bool = True
+    """Keep the first-order correlation between a measurement's position and heading errors.
+    Right for corners with independent Gaussian noise; a CNN's corner errors are neither, and its
+    heading errors (large where PnP's two solutions are close) then move the position through
+    that correlation, past where the detection puts the gate (``DETECTOR_HEADING_CORRELATION``)."""
     min_sigma_m: float = 0.01
     """Floor of the position standard deviation of one measurement, per axis, m."""
     odometry_att_sigma_deg: float = 0.3
@@ -193,10 +198,19 @@ estimate metres toward the drone: on the open loop over 140 layouts it cuts wron
 at slightly larger near errors (within 5 m, p95 0.228 -> 0.237 m); see docs/estimation.md."""
 
 
+DETECTOR_HEADING_CORRELATION = {"cnn": False}
+"""``MeasurementConfig.heading_correlation`` of each detector (others: kept). Dropped for the CNN
+on 2026-12-06, after a gate's estimate was seen to move 0.4 m past three reads 0.25 m short of it
+3 m before the gate: without it, on the open loop over 140 layouts, frames within 3 m of the gate
+with the estimate more than 0.3 m off fell 2.66 -> 1.39 % (more than 0.2 m: 5.28 -> 3.80 %; p95
+within 5 m 0.238 -> 0.210 m); see docs/estimation.md."""
+
+
 def config_for_detector(detector: str, mode: str = "map-aided") -> EstimatorConfig:
     """The estimator set up for a detector's corner noise (oracle and unknown names: 1 px)."""
     m = MeasurementConfig(
         pixel_sigma=DETECTOR_PIXEL_SIGMA.get(detector, 1.0),
         range_inflation_m=DETECTOR_RANGE_INFLATION_M.get(detector, float("inf")),
+        heading_correlation=DETECTOR_HEADING_CORRELATION.get(detector, True),
     )
     return EstimatorConfig(mode=mode, measurement=m)

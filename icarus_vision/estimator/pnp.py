@@ -260,8 +260,11 @@ def measurement_covariance(
     cov = np.empty((*cov6.shape[:-2], 4, 4))
     cov[..., :3, :3] = r_world_cam @ cov6[..., :3, :3] @ r_world_cam.T
     cov[..., :3, :3] += floor[..., None, None] * _EYE3
-    cross = (cov6[..., :3, 3:] @ up_cam) @ r_world_cam.T  # R (C_tθ up), as rows
-    cov[..., :3, 3] = cov[..., 3, :3] = cross
+    if cfg.heading_correlation:
+        cross = (cov6[..., :3, 3:] @ up_cam) @ r_world_cam.T  # R (C_tθ up), as rows
+        cov[..., :3, 3] = cov[..., 3, :3] = cross
+    else:
+        cov[..., :3, 3] = cov[..., 3, :3] = 0.0
     cov[..., 3, 3] = (cov6[..., 3:, 3:] @ up_cam) @ up_cam + att**2
     return cov
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from icarus_vision.estimator.config import MeasurementConfig
+from icarus_vision.estimator.config import MeasurementConfig, config_for_detector
 from icarus_vision.estimator.pnp import (
     check_corners,
     gate_yaw,
@@ -174,3 +174,21 @@ def test_range_inflation_doubles_the_covariance_at_its_distance():
     np.testing.assert_allclose(batched[1], 2.0 * base)
     with pytest.raises(ValueError, match="range_inflation_m"):
         MeasurementConfig(range_inflation_m=0.0)
+
+
+def test_the_position_heading_correlation_can_be_dropped():
+    """Without the correlation only the position-heading block is zeroed; the CNN's estimator
+    drops it, the oracle's keeps it."""
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(6, 6))
+    cov6 = a @ a.T + np.eye(6)
+    r = np.eye(3)[[2, 0, 1]]  # a rotation (a permutation of the axes)
+    kept = measurement_covariance(cov6, 5.0, r, MeasurementConfig())
+    dropped = measurement_covariance(cov6, 5.0, r, MeasurementConfig(heading_correlation=False))
+    assert np.abs(kept[:3, 3]).max() > 1e-3
+    np.testing.assert_array_equal(dropped[:3, 3], 0.0)
+    np.testing.assert_array_equal(dropped[3, :3], 0.0)
+    np.testing.assert_allclose(dropped[:3, :3], kept[:3, :3])
+    assert dropped[3, 3] == kept[3, 3]
+    assert not config_for_detector("cnn").measurement.heading_correlation
+    assert config_for_detector("oracle").measurement.heading_correlation
