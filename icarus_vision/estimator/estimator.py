@@ -285,6 +285,7 @@ class GateEstimator:
             return False
         pairs, unmatched, left = match_detections(sols, self.tracks, size, r_wc, t_wc, self.config)
         self.counts["duplicates"] += left
+        # What match_detections neither matched, kept as outliers nor left over lay under the floor.
         self.counts["below_ground"] += len(sols.distance) - len(pairs) - len(unmatched) - left
         chosen = {ti: m for _, ti, m in pairs}  # track -> its measurement
         if chosen:

@@ -188,7 +188,8 @@ def _track_scores(
     Args:
         gaps: (D, 2) each slot's cost minus the best slot's.
         means: (M, 4), covs: (M, 4, 4) gate tracks (of the measurements' size).
-        excluded: (D, 2, M) pairs outside the direction or range gates: their d² is infinite.
+        excluded: (D, 2, M) pairs outside the direction or range gates, or below the floor: their
+            d² is infinite.
 
     Returns:
         (D, M) arrays: the score, its d², the slot, and the other slot's score minus the best's.
@@ -262,9 +263,9 @@ def match_detections(
         off_range = (seen > ratio * (track_range[idx] + track_spread[idx])) | (
             seen * ratio < track_range[idx] - track_spread[idx]
         )
-        off_range |= (m.z[:, :, 2] < cfg.measurement.min_height_m)[..., None]  # below the floor
+        below_floor = (m.z[:, :, 2] < cfg.measurement.min_height_m)[..., None]
         top, d2, slot[:, idx], alt[:, idx] = _track_scores(
-            m, gaps, means[idx], covs[idx], off_bearing[:, :, idx] | off_range
+            m, gaps, means[idx], covs[idx], off_bearing[:, :, idx] | off_range | below_floor
         )
         score[:, idx] = np.where(d2 <= cfg.filter.gate_chi2, top, np.inf)
     allowed = np.isfinite(score)
