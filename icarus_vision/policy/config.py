@@ -82,6 +82,11 @@ class CurriculumConfig:
     """Random tracks: the chance that a training episode re-flies a layout the policy failed on
     (prioritised level replay; ``EnvConfig.layout_replay``). Replayed episodes do not count
     towards promotion, and evaluations always draw new layouts. 0: every layout new."""
+    crash_replay: float = 0.0
+    """The chance that a training episode starts again from a state flown 0.4–1.6 s before an
+    earlier crash of the batch, on that episode's track with its parameters and wind
+    (``EnvConfig.crash_replay``): more of the moments the policy fails at. Such episodes do not
+    count towards promotion. 0: every episode from the start."""
 
 
 @dataclass(frozen=True)
@@ -243,6 +248,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("curriculum.window", c.curriculum.window >= 1),
         ("curriculum.min_episodes", 1 <= c.curriculum.min_episodes),
         ("curriculum.layout_replay", 0 <= c.curriculum.layout_replay < 1),
+        ("curriculum.crash_replay", 0 <= c.curriculum.crash_replay < 1),
         (
             "curriculum.difficulty",
             c.curriculum.difficulty is None

@@ -94,6 +94,7 @@ def make_train_env(
     features: str | None = None,
     layout_replay: float = 0.0,
     quad: QuadParams | None = None,
+    crash_replay: float = 0.0,
 ):
     """The training VecEnv stack: batched drones -> perception noise -> policy features
     (-> the privileged critic's block, with ``cfg.privileged_critic``).
@@ -101,7 +102,8 @@ def make_train_env(
     Random tracks of ``num_gates`` gates at layout ``difficulty`` (None: classic layouts), or the
     config's fixed ``track``; ``features``: the transform (None: ``run_features(cfg)``);
     ``layout_replay``: the chance an episode re-flies a failed layout (training only); ``quad``:
-    the config's quadrotor when already loaded (None: ``train_quad(cfg)`` reads it).
+    the config's quadrotor when already loaded (None: ``train_quad(cfg)`` reads it);
+    ``crash_replay``: the chance an episode starts shortly before an earlier crash (training only).
     """
     track = None if cfg.track is None else resolve_track(cfg.track)
     env_cfg = EnvConfig(
@@ -111,6 +113,7 @@ def make_train_env(
         num_gates=num_gates,
         layout_difficulty=difficulty if track is None else None,
         layout_replay=layout_replay if track is None else 0.0,
+        crash_replay=crash_replay,
         randomization=cfg.randomization,
         reward=cfg.reward_config(),
         observation=cfg.observation,
@@ -255,7 +258,7 @@ def train_policy(
     features = run_features(cfg)
     env = make_train_env(
         cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage), features,
-        stages.layout_replay, quad,
+        stages.layout_replay, quad, stages.crash_replay,
     )  # fmt: skip
     if resume:
         try:

@@ -107,6 +107,14 @@ class EnvConfig:
     """Random tracks only: the chance that an episode re-flies a layout some drone of the batch
     failed on (crash or time-out) instead of drawing a new one (the gates jittered afresh); each
     failed layout is flown again once, and again after each further failure. 0: every layout new."""
+    crash_replay: float = 0.0
+    """The chance that an episode starts again from a state a drone of the batch flew shortly
+    before it crashed (on that drone's track, with its parameters, wind and clock) instead of
+    from the start (the state replay of hard moments; training on the batched backend). Each
+    crash is replayed once. 0: every episode from the start."""
+    crash_replay_s: tuple[float, float] = (0.4, 1.6)
+    """How long before the crash the replayed state was flown, s: drawn uniformly in this range
+    (to the nearest snapshot; snapshots every 0.2 s, kept for 2 s)."""
     quad: QuadParams = field(default_factory=QuadParams)
     """The quadrotor."""
     ctrl_hz: float = 50.0
@@ -147,6 +155,13 @@ class EnvConfig:
             )
         if not 0.0 <= self.layout_replay < 1.0:
             raise ValueError(f"layout_replay must be in [0, 1), got {self.layout_replay}")
+        if not 0.0 <= self.crash_replay < 1.0:
+            raise ValueError(f"crash_replay must be in [0, 1), got {self.crash_replay}")
+        lo, hi = self.crash_replay_s
+        if not 0.0 < lo <= hi <= 2.0:
+            raise ValueError(
+                f"crash_replay_s must be (lo, hi) with 0 < lo <= hi <= 2 s, got {self.crash_replay_s}"
+            )
         if self.num_gates is not None and self.num_gates < 1:
             raise ValueError(f"num_gates must be >= 1, got {self.num_gates}")
 

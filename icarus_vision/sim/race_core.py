@@ -37,6 +37,9 @@ from icarus_vision.sim.track import Track
 TAKEOFF_CLEARANCE = 0.1  # m above the ground (sphere bottom) that counts as airborne
 RANDOM_TRACK_GATES = 10
 REPLAY_CAPACITY = 1024  # failed layouts kept for ``layout_replay``, newest kept
+SNAPSHOT_S = 0.2  # crash replay: a snapshot of each drone's flight every this many seconds
+SNAPSHOT_SLOTS = 10  # ... the last ten kept (2 s)
+_SNAP_STATE = ("pos", "vel", "quat", "omega", "thrust")
 
 
 class RaceCore:
@@ -77,6 +80,17 @@ class RaceCore:
         self.start_pos = np.zeros((n, 3))
         self.ep_difficulty = np.full(n, np.nan)  # layout difficulty of each drone's episode
         self.prev_action = np.full((n, 4), np.nan)
+        self.crashes: list[dict] = []  # moments before crashes, for ``cfg.crash_replay``
+        self._snap_every = max(1, round(SNAPSHOT_S * cfg.ctrl_hz))
+        if cfg.crash_replay > 0:
+            self.snaps = {
+                "pos": np.zeros((n, SNAPSHOT_SLOTS, 3)), "vel": np.zeros((n, SNAPSHOT_SLOTS, 3)),
+                "quat": np.zeros((n, SNAPSHOT_SLOTS, 4)), "omega": np.zeros((n, SNAPSHOT_SLOTS, 3)),
+                "thrust": np.zeros((n, SNAPSHOT_SLOTS)), "prev_action": np.zeros((n, SNAPSHOT_SLOTS, 4)),
+                "t": np.full((n, SNAPSHOT_SLOTS), np.nan), "lap_start": np.zeros((n, SNAPSHOT_SLOTS)),
+                "target": np.zeros((n, SNAPSHOT_SLOTS), dtype=np.int64),
+                "laps": np.zeros((n, SNAPSHOT_SLOTS), dtype=np.int64),
+            }  # fmt: skip
 
     # -- track arrays ------------------------------------------------------------------------
     def _capacity(self) -> int:
@@ -174,28 +188,20 @@ class RaceCore:
         cfg, r = self.cfg, self.cfg.randomization
         state = QuadState.zeros(len(idx))
         start_yaw = np.zeros(len(idx))
+        restored = []
         for k, i in enumerate(idx):
             rng = self.rngs[i]
+            moment = self._replay_crash(rng)
+            if moment is not None:
+                restored.append((k, i, moment))
+                continue
             layout = self._replay_layout(rng)
             self.replayed[i] = layout is not None
             layout = self._layout(rng) if layout is None else layout
-            self.layouts[i] = layout
-            track = self.tracks[i] = self._jitter(layout, rng)
+            track = self._jitter(layout, rng)
             random_layout = self.base_track is None and self.difficulty is not None
-            self.ep_difficulty[i] = self.difficulty if random_layout else np.nan
-            passages = track.passages
-            m = len(passages)
-            self.g_mask[i] = False
-            self.g_mask[i, :m] = True
-            self.g_pos[i, :m] = [g.pos for g in passages]
-            self.g_yaw[i, :m] = [g.yaw for g in passages]
-            self.g_cos[i], self.g_sin[i] = np.cos(self.g_yaw[i]), np.sin(self.g_yaw[i])
-            self.g_size[i, :m] = [g.size for g in passages]
-            self.g_fw[i, :m] = [g.frame_width for g in passages]
-            self.g_reach[i] = np.sqrt(2.0) * (self.g_size[i] / 2 + self.g_fw[i]) + self.g_fw[i]
-            self.n_pass[i] = m
-            self.gates_per_lap[i] = len(track.gates)
-            self.bounds_lo[i], self.bounds_hi[i] = track.bounds_min, track.bounds_max
+            self._set_track(i, layout, track, self.difficulty if random_layout else np.nan)
+            m = len(track.passages)
             mass, thrust_max = cfg.quad.mass, cfg.quad.thrust_max
             tau, drag = cfg.quad.motor_tau, np.array(cfg.quad.drag, float)
             self.wind_const[i] = 0.0
@@ -231,7 +237,91 @@ class RaceCore:
         for sums in self.ep_terms.values():
             sums[idx] = 0.0
         self.ep_len[idx] = 0
+        if self.cfg.crash_replay > 0:
+            self.snaps["t"][idx] = np.nan
+        for k, i, moment in restored:
+            self._restore(k, i, moment, state)
         return state
+
+    # -- crash replay ------------------------------------------------------------------------
+    def _set_track(self, i: int, layout: Track, track: Track, difficulty: float) -> None:
+        """Drone ``i`` flies ``track`` (``layout`` before the jitter) from its next step."""
+        self.layouts[i], self.tracks[i] = layout, track
+        self.ep_difficulty[i] = difficulty
+        passages = track.passages
+        m = len(passages)
+        self.g_mask[i] = False
+        self.g_mask[i, :m] = True
+        self.g_pos[i, :m] = [g.pos for g in passages]
+        self.g_yaw[i, :m] = [g.yaw for g in passages]
+        self.g_cos[i], self.g_sin[i] = np.cos(self.g_yaw[i]), np.sin(self.g_yaw[i])
+        self.g_size[i, :m] = [g.size for g in passages]
+        self.g_fw[i, :m] = [g.frame_width for g in passages]
+        self.g_reach[i] = np.sqrt(2.0) * (self.g_size[i] / 2 + self.g_fw[i]) + self.g_fw[i]
+        self.n_pass[i] = m
+        self.gates_per_lap[i] = len(track.gates)
+        self.bounds_lo[i], self.bounds_hi[i] = track.bounds_min, track.bounds_max
+
+    def _replay_crash(self, rng: np.random.Generator) -> dict | None:
+        """A moment before a crash to start from, or None (``cfg.crash_replay``)."""
+        if not self.crashes or rng.random() >= self.cfg.crash_replay:
+            return None
+        return self.crashes.pop(int(rng.integers(len(self.crashes))))
+
+    def _snapshot(self, state: QuadState, live: np.ndarray) -> None:
+        """Record the flight of drones ``live`` (bool (N,)) every ``SNAPSHOT_S``."""
+        due = live & (self.ep_len % self._snap_every == 0)
+        if not due.any():
+            return
+        rows = np.flatnonzero(due)
+        slot = (self.ep_len[rows] // self._snap_every) % SNAPSHOT_SLOTS
+        s = self.snaps
+        for name in _SNAP_STATE:
+            s[name][rows, slot] = getattr(state, name)[rows]
+        s["prev_action"][rows, slot] = self.prev_action[rows]
+        s["t"][rows, slot] = self.t[rows]
+        s["lap_start"][rows, slot] = self.lap_start[rows]
+        s["target"][rows, slot] = self.target[rows]
+        s["laps"][rows, slot] = [len(self.lap_times[i]) for i in rows]
+
+    def _keep_crash(self, i: int) -> None:
+        """Keep the moment of drone ``i``'s flight about ``crash_replay_s`` before its crash."""
+        s, rng = self.snaps, self.rngs[i]
+        age = self.t[i] - s["t"][i]  # NaN for empty slots
+        back = rng.uniform(*self.cfg.crash_replay_s)
+        ok = np.flatnonzero(age >= self.cfg.crash_replay_s[0] - 1e-9)
+        if len(ok) == 0:
+            return
+        j = ok[np.argmin(np.abs(age[ok] - back))]
+        p = self.params
+        self.crashes.append({
+            "layout": self.layouts[i], "track": self.tracks[i],
+            "difficulty": self.ep_difficulty[i], "start_pos": self.start_pos[i].copy(),
+            "max_t": self.max_t[i], "mass": p.mass[i], "thrust_max": p.thrust_max[i],
+            "motor_tau": p.motor_tau[i], "drag": p.drag[i].copy(),
+            "wind": (self.wind_const[i].copy(), self.gust_amp[i].copy(),
+                     self.gust_freq[i].copy(), self.gust_phase[i].copy()),
+            "lap_times": self.lap_times[i][: s["laps"][i, j]],
+            **{k: np.copy(v[i, j]) for k, v in s.items() if k != "laps"},
+        })  # fmt: skip
+        del self.crashes[:-REPLAY_CAPACITY]
+
+    def _restore(self, k: int, i: int, m: dict, state: QuadState) -> None:
+        """Drone ``i`` (row ``k`` of ``state``) starts from the kept moment ``m``."""
+        self.replayed[i] = True
+        self._set_track(i, m["layout"], m["track"], m["difficulty"])
+        p = self.params
+        p.mass[i], p.thrust_max[i], p.motor_tau[i] = m["mass"], m["thrust_max"], m["motor_tau"]
+        p.drag[i] = m["drag"]
+        self.wind_const[i], self.gust_amp[i], self.gust_freq[i], self.gust_phase[i] = m["wind"]
+        self.start_pos[i], self.max_t[i] = m["start_pos"], m["max_t"]
+        for name in _SNAP_STATE:
+            getattr(state, name)[k] = m[name]
+        self.prev_action[i] = m["prev_action"]
+        self.t[i], self.lap_start[i], self.target[i] = m["t"], m["lap_start"], m["target"]
+        self.taken_off[i] = True
+        self.lap_times[i] = list(m["lap_times"])
+        self.last_lap_time[i] = self.lap_times[i][-1] if self.lap_times[i] else np.nan
 
     def wind(self) -> np.ndarray:
         """(N, 3) world air velocity at the current time of each drone, m/s."""
@@ -344,6 +434,10 @@ class RaceCore:
             for i in np.flatnonzero((terminated | truncated) & ~all_passed):
                 self.replay.append(self.layouts[i])
             del self.replay[:-REPLAY_CAPACITY]
+        if self.cfg.crash_replay > 0:
+            for i in np.flatnonzero(crashed):
+                self._keep_crash(i)
+            self._snapshot(state, ~(terminated | truncated))
         self.ep_return += reward
         for k, v in terms.items():
             self.ep_terms.setdefault(k, np.zeros(self.n))[:] += v
