@@ -103,3 +103,16 @@ def test_bad_settings_are_refused():
         EnvConfig(random_tracks=True, crash_replay=0.3, crash_replay_s=(0.0, 1.0))
     with pytest.raises(ValueError, match="crash_replay_s"):
         EnvConfig(random_tracks=True, crash_replay=0.3, crash_replay_s=(1.0, 3.0))
+
+
+def test_a_train_config_passes_it_to_the_training_env_only():
+    from icarus_vision.policy.config import SPECIALIST, config_from_dict
+    from icarus_vision.policy.train import make_train_env
+
+    cfg = config_from_dict({"curriculum": {"crash_replay": 0.4}})
+    assert cfg.curriculum.crash_replay == 0.4
+    with pytest.raises(ValueError, match="crash_replay"):
+        config_from_dict({"curriculum": {"crash_replay": 1.5}})
+    env = make_train_env(SPECIALIST, 2, 3, seed=0, crash_replay=cfg.curriculum.crash_replay)
+    assert env.unwrapped.core.cfg.crash_replay == 0.4
+    assert make_train_env(SPECIALIST, 2, 3, seed=0).unwrapped.core.cfg.crash_replay == 0.0
