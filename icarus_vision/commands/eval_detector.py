@@ -68,6 +68,13 @@ def eval_detector_cmd(
     backend: str = typer.Option(
         None, help="cnn only: what runs its networks: auto (default), int8, onnxruntime or torch."
     ),
+    min_score: float = typer.Option(
+        None,
+        min=0.0,
+        max=1.0,
+        help="cnn only: count only gates scored at least this (a confidence threshold: fewer "
+        "false gates for fewer found; default: all the detector reports).",
+    ),
 ) -> None:
     """Precision, recall, corner error (pixels and % of the gate's side), PCK and ms/frame (one
     core), overall and by distance/size, with 95 % confidence intervals (bootstrap over the
@@ -91,7 +98,7 @@ def eval_detector_cmd(
         r = eval_detector(data, detector, json_path, error_model, min_gate_px, split, limit=limit,
                           progress=progress, examples_path=examples,
                           examples=num_examples, seed=seed, resamples=resamples,
-                          backend=backend)  # fmt: skip
+                          backend=backend, min_score=min_score)  # fmt: skip
     split_name = f"{r['split']} " if r["has_distance"] else ""
     title = (f"{r['detector']} on {r['images']} {split_name}images, {r['gates']} gates >= "
              f"{r['min_gate_px']:g} px")  # fmt: skip
@@ -107,6 +114,8 @@ def eval_detector_cmd(
         spans = ", ".join(f"{v} {ci[k][0]:.3f}-{ci[k][1]:.3f}" for k, v in names.items() if ci[k])
         console.print(f"95 % intervals (bootstrap over images): {spans}", highlight=False)
     backend = f", {r['backend']}" if r["backend"] else ""
+    if r["min_score"] is not None:
+        backend += f", gates scored >= {r['min_score']:g}"
     console.print(f"{r['ms_per_frame']:.2f} ms per frame (one core{backend}; {r['cpu']})",
                   highlight=False)  # fmt: skip
     if r["error_model_path"]:

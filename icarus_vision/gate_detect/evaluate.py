@@ -64,6 +64,7 @@ def eval_detector(
     seed: int = 0,
     resamples: int = 1000,
     backend: str | None = None,
+    min_score: float | None = None,
 ) -> dict:
     """Evaluate a detector on a gen-dataset split, a COCO-keypoints folder (e.g. real images
     from ``import-gates``; breakdowns by apparent size only, no error model) or a folder of
@@ -86,9 +87,11 @@ def eval_detector(
         resamples: bootstrap resamples of the test images (0: no ``confidence``).
         backend: what runs a CNN's networks (``CnnDetector``'s ``backend``: auto, int8,
             onnxruntime or torch); None: its default, auto. Only for a ``cnn`` spec.
+        min_score: count only the gates the detector scores at least this (``CnnDetector``'s
+            ``min_score``; None: all it reports). Only for a ``cnn`` spec.
 
     Returns:
-        the report: detector, backend (a CNN's: what ran its networks), images, gates, min_gate_px, precision, recall, corner_error_px
+        the report: detector, backend (a CNN's: what ran its networks), min_score, images, gates, min_gate_px, precision, recall, corner_error_px
         {mean, median}, pck {2px, 5px}, confidence (95 % bootstrap intervals of those figures
         over the test images: :func:`~icarus_vision.gate_detect.metrics.confidence`),
         ms_per_frame (and its median, and the ``cpu`` it ran on), by_distance, by_size,
@@ -105,7 +108,8 @@ def eval_detector(
     ext = (Path(examples_path).suffix.lower() or ".jpg") if examples_path is not None else None
     if ext is not None and not cv2.haveImageWriter(f"examples{ext}"):
         raise ValueError(f"{examples_path}: cannot write an image of this type (use .jpg or .png)")
-    detector = make_detector(detector_spec, **({} if backend is None else {"backend": backend}))
+    settings = {k: v for k, v in (("backend", backend), ("min_score", min_score)) if v is not None}
+    detector = make_detector(detector_spec, **settings)
     data = load_eval_set(data_dir, split, limit)
     gts, preds, samples, times, tiles, per_image = [], [], [], [], [], []
     n = len(data.files)
@@ -136,6 +140,7 @@ def eval_detector(
     report = {
         "detector": detector_spec,
         "backend": getattr(detector, "backend", None),
+        "min_score": getattr(detector, "min_score", None),
         "split": split,
         "data": str(data_dir),
         "images": n,

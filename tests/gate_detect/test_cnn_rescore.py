@@ -155,6 +155,27 @@ def test_the_detector_reports_what_the_rescorer_passes(tmp_path, monkeypatch):
     assert det.detect(img) == []
 
 
+def test_min_score_keeps_only_the_gates_scored_at_least_it(tmp_path, monkeypatch):
+    det = CnnDetector.load(_detector(tmp_path / "ck"), backend="torch", min_score=0.7)
+    assert det.min_score == 0.7
+    img = gate_image()
+    quads = np.stack([QUAD, QUAD + 0.5])
+    monkeypatch.setattr(det, "_candidates", lambda im, o, s: (
+        np.array([0.9, 0.8]), np.ones(2), quads, quads))  # fmt: skip
+    det.rescorer = Constant(0.6, threshold=0.5)
+    assert det.detect(img) == []  # passed by the rescorer, under min_score
+    det.min_score = 0.55
+    assert [d.score for d in det.detect(img)] == [pytest.approx(0.6)]
+    det.min_score = None
+    assert len(det.detect(img)) == 1
+    with pytest.raises(ValueError, match="min_score"):
+        CnnDetector.load(_detector(tmp_path / "ck2"), backend="torch", min_score=1.5)
+    # reachable by name, as the commands build it; a detector without the setting says so
+    assert make_detector(f"cnn:{tmp_path / 'ck'}", min_score=0.9).min_score == 0.9
+    with pytest.raises(ValueError, match="min_score"):
+        make_detector("opencv", min_score=0.9)
+
+
 def test_train_rescorer_writes_a_detector_that_loads_and_reuses_its_table(
     tiny_dataset, tmp_path, monkeypatch
 ):

@@ -53,6 +53,27 @@ def test_eval_detector_reads_the_split_asked_for(tiny_dataset, tmp_path):
     assert r.exit_code == 2 and "expected one of train, val, test" in r.output
 
 
+def test_eval_detector_min_score_counts_only_the_surer_gates(tiny_dataset, tmp_path):
+    reports = {}
+    for score in (None, "1.0"):
+        out = tmp_path / f"r{score}.json"
+        extra = [] if score is None else ["--min-score", score]
+        r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--json", str(out),
+                                "--resamples", "0", *extra])  # fmt: skip
+        assert r.exit_code == 0, r.output
+        reports[score] = json.loads(out.read_text())
+    assert reports[None]["min_score"] is None and reports["1.0"]["min_score"] == 1.0
+    assert reports["1.0"]["false_positives"] <= reports[None]["false_positives"]
+    if reports[None]["gates"]:
+        assert reports["1.0"]["recall"] <= reports[None]["recall"]
+    assert "gates scored >= 1" in r.output
+    r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--min-score", "2"])
+    assert r.exit_code == 2 and "--min-score" in r.output
+    r = runner.invoke(app, ["eval-detector", "--data", str(tiny_dataset), "--detector", "opencv",
+                            "--min-score", "0.5"])  # fmt: skip
+    assert r.exit_code != 0 and "min_score" in r.output
+
+
 @pytest.mark.parametrize(
     "args, needle",
     [
