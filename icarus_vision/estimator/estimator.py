@@ -268,6 +268,13 @@ class GateEstimator:
         next gate was among them."""
         r_wc, t_wc = self._r_wb @ self._r_body_cam, odom.pos
         size = self._size_guess()
+        if detections:
+            self.counts["detections"] += len(detections)
+        floor = self.config.measurement.min_score
+        if floor > 0 and detections:
+            sure = [d for d in detections if d.score >= floor]
+            self.counts["rejected_low_score"] += len(detections) - len(sure)
+            detections = sure
         sols, reasons = solve_detections(
             detections,
             self._k,
@@ -278,8 +285,6 @@ class GateEstimator:
             size,
             self.camera.undistort if self.camera.distorted else None,
         )
-        if detections:
-            self.counts["detections"] += len(detections)
         self.counts.update(f"rejected_{r}" for r in reasons if r is not None)
         if sols is None:
             return False

@@ -301,3 +301,35 @@ def test_the_passage_heading_stays_near_the_maps(limit, passed):
             heading = np.degrees(e.yaw)
             assert heading == pytest.approx(30.0 if np.isfinite(limit) else 70.0, abs=1e-6)
     assert (est.target == 1) == passed
+
+
+def test_detections_under_min_score_are_not_measured(two_gates):
+    """A detector's doubtful reads (scored under ``min_score``) are neither measurements nor
+    outliers; the sure ones are measured as before."""
+    from dataclasses import replace
+
+    from icarus_vision.estimator.config import DETECTOR_MIN_SCORE, config_for_detector
+
+    fake = OracleDetector(Track("fake", (Gate((6.0, 1.5, 2.5)),)), CAM, seed=1)
+
+    def doubtful(t):
+        od = odom_at(t, [0.0, 0.0, 2.0])
+        return [replace(d, score=0.4) for d in fake.detect_pose(od.pos, od.quat)]
+
+    for floor in (0.0, 0.7):
+        cfg = EstimatorConfig()
+        cfg = replace(cfg, measurement=replace(cfg.measurement, min_score=floor))
+        est = GateEstimator(CAM, cfg, displaced_map(two_gates, 0.2, 3.0, seed=1))
+        oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+        res = _fly(est, oracle, 0.0, 1.5, 0.0, 2.0, extra=doubtful)
+        x = 2.0 * res[-1].t / 1.5
+        assert np.linalg.norm(res[-1].rel_world - _truth_rel(two_gates.gates[0], x)) < 0.05
+        if floor == 0.0:
+            assert est.counts["outliers"] > len(res) // 2 and est.counts["rejected_low_score"] == 0
+        else:
+            assert est.counts["outliers"] == 0 and est.counts["rejected_low_score"] == len(res)
+            assert est.counts["accepted"] >= len(res)
+    assert config_for_detector("cnn").measurement.min_score == DETECTOR_MIN_SCORE["cnn"]
+    assert config_for_detector("opencv").measurement.min_score == 0.0
+    with pytest.raises(ValueError, match="min_score"):
+        replace(cfg.measurement, min_score=1.5)
