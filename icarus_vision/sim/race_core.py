@@ -77,6 +77,7 @@ class RaceCore:
         self.ep_terms: dict[str, np.ndarray] = {}  # per-term episode sums
         self.ep_len = np.zeros(n, dtype=np.int64)
         self.lap_times: list[list[float]] = [[] for _ in range(n)]
+        self.n_laps = np.zeros(n, dtype=np.int64)  # len(lap_times[i]), as an array
         self.start_pos = np.zeros((n, 3))
         self.ep_difficulty = np.full(n, np.nan)  # layout difficulty of each drone's episode
         self.prev_action = np.full((n, 4), np.nan)
@@ -237,6 +238,7 @@ class RaceCore:
         for sums in self.ep_terms.values():
             sums[idx] = 0.0
         self.ep_len[idx] = 0
+        self.n_laps[idx] = 0
         if self.cfg.crash_replay > 0:
             self.snaps["t"][idx] = np.nan
         for k, i, moment in restored:
@@ -282,7 +284,7 @@ class RaceCore:
         s["t"][rows, slot] = self.t[rows]
         s["lap_start"][rows, slot] = self.lap_start[rows]
         s["target"][rows, slot] = self.target[rows]
-        s["laps"][rows, slot] = [len(self.lap_times[i]) for i in rows]
+        s["laps"][rows, slot] = self.n_laps[rows]
 
     def _keep_crash(self, i: int) -> None:
         """Keep the moment of drone ``i``'s flight about ``crash_replay_s`` before its crash."""
@@ -321,6 +323,7 @@ class RaceCore:
         self.t[i], self.lap_start[i], self.target[i] = m["t"], m["lap_start"], m["target"]
         self.taken_off[i] = True
         self.lap_times[i] = list(m["lap_times"])
+        self.n_laps[i] = len(self.lap_times[i])
         self.last_lap_time[i] = self.lap_times[i][-1] if self.lap_times[i] else np.nan
 
     def wind(self) -> np.ndarray:
@@ -425,6 +428,7 @@ class RaceCore:
             for i in np.flatnonzero(lap_done):
                 lap = float(self.t[i] - self.lap_start[i])
                 self.lap_times[i].append(lap)
+                self.n_laps[i] += 1
                 self.last_lap_time[i] = lap
                 self.lap_start[i] = self.t[i]
         all_passed = self.target >= self.n_pass
