@@ -121,6 +121,10 @@ class PerceptionNoiseConfig:
     """The share of the training drones that fly with the map's errors above (the others start
     each gate from an ordinary detection), so a policy learns the map's errors without giving up
     the flight on known gates. 1: all of them."""
+    bias_m: float = 0.0
+    """A persistent error per gate, as an estimator's near errors are (a gate's reads err the
+    same way frame after frame, and the filter follows them): each target gate's detections are
+    all off by one draw of N(0, this²) per axis, on top of the white noise above. 0: none."""
 
 
 @dataclass(frozen=True)
@@ -285,6 +289,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("perception.map_error_m", c.perception.map_error_m >= 0),
         ("perception.map_yaw_error_deg", 0 <= c.perception.map_yaw_error_deg <= 180),
         ("perception.map_share", 0 <= c.perception.map_share <= 1),
+        ("perception.bias_m", 0 <= c.perception.bias_m < 1),
         ("max_episode_s", c.max_episode_s is None or c.max_episode_s > 0),
     ]
     for name, ok in checks:

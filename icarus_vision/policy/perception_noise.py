@@ -122,6 +122,7 @@ class PerceptionNoise:
         map_error_m: float = 0.0,
         map_yaw_error_deg: float = 0.0,
         map_share: float = 1.0,
+        bias_m: float = 0.0,
     ) -> None:
         """``camera``: when given, gates outside its field of view are never seen;
         ``map_error_m``: a new target gate's first estimate is the truth moved uniformly within
@@ -130,7 +131,9 @@ class PerceptionNoise:
         this until the gate is seen, and the gate after it is off by ± ``map_error_m`` per axis
         (both from the map, as in a race; drawn from a stream of their own); ``map_share``: the
         share of the drones (the first of the batch) that fly with the map's errors, the others
-        starting each gate from an ordinary detection (the same draws either way)."""
+        starting each gate from an ordinary detection (the same draws either way); ``bias_m``:
+        every detection of a target gate is off by the same N(0, bias_m²) draw per axis, made
+        when the gate becomes the target (a stream of its own, so the other draws stand)."""
         self.model = model
         self.map_drones = np.arange(n) < round(map_share * n)
         self.camera = camera
@@ -142,6 +145,9 @@ class PerceptionNoise:
         self.true_prev = np.full((n, 3), np.nan)
         self.yaw_err = np.zeros(n)
         self.after_err = np.zeros((n, 3))
+        self.bias_m = bias_m
+        self.bias_rng = np.random.default_rng(None if seed is None else [seed, 2])
+        self.bias = np.zeros((n, 3))
 
     def apply(self, obs: np.ndarray, new_episode: np.ndarray | None = None) -> np.ndarray:
         """Perceived observations.
@@ -167,6 +173,10 @@ class PerceptionNoise:
         if self.map_error_m > 0:
             prior = self.rng.uniform(-self.map_error_m, self.map_error_m, size=(len(obs), 3))
             noise = np.where((switched & self.map_drones)[:, None], prior, noise)
+        if self.bias_m > 0:
+            draw = self.bias_rng.normal(size=(len(obs), 3)) * self.bias_m
+            self.bias = np.where(switched[:, None], draw, self.bias)
+            noise = noise + self.bias
         self.est = np.where(seen[:, None], true_gate + noise, self.est)
         self.true_prev = true_gate
         out = obs.astype(np.float32, copy=True)
@@ -198,10 +208,11 @@ class PerceptionNoiseVecEnv(VecEnvWrapper):
         map_error_m: float = 0.0,
         map_yaw_error_deg: float = 0.0,
         map_share: float = 1.0,
+        bias_m: float = 0.0,
     ) -> None:
         super().__init__(venv)
         self.noise = PerceptionNoise(
-            model, venv.num_envs, seed, camera, map_error_m, map_yaw_error_deg, map_share
+            model, venv.num_envs, seed, camera, map_error_m, map_yaw_error_deg, map_share, bias_m
         )
 
     def reset(self) -> np.ndarray:

@@ -79,6 +79,31 @@ def test_a_new_gate_starts_from_the_maps_error_and_keeps_it_until_seen():
         config_from_dict({"perception": {"map_error_m": -0.1}})
 
 
+def test_a_gates_bias_holds_for_its_whole_approach_and_is_drawn_again_for_the_next():
+    """With ``bias_m`` every detection of one target gate is off the same way (the white noise
+    on top unchanged: the same draws as without it); a new gate draws a new bias."""
+    model = ErrorModel((0.0, 30.0), (0.01, 0.01), (0.0, 0.0))  # 1 cm white noise, no misses
+    n = 4000
+    ahead = np.tile([[5.0, 0.0, 0.0]], (n, 1))  # in front of the camera: seen every frame
+    biased = PerceptionNoise(model, n, seed=0, camera=CameraParams(), bias_m=0.1)
+    plain = PerceptionNoise(model, n, seed=0, camera=CameraParams())
+    offsets = []
+    for step in range(3):
+        new = np.full(n, step == 0)
+        b = biased.apply(_obs(0.0, ahead), new)[:, 12:15]
+        p = plain.apply(_obs(0.0, ahead), new)[:, 12:15]
+        offsets.append(b - p)
+    assert offsets[1] == pytest.approx(offsets[0], abs=1e-5)  # the same bias frame after frame
+    assert offsets[2] == pytest.approx(offsets[0], abs=1e-5)
+    assert offsets[0].std(axis=0) == pytest.approx(np.full(3, 0.1), rel=0.05)
+    moved = ahead + [0.0, 2.0, 0.0]  # the next gate: a new draw
+    b = biased.apply(_obs(0.0, moved), np.zeros(n, bool))[:, 12:15]
+    p = plain.apply(_obs(0.0, moved), np.zeros(n, bool))[:, 12:15]
+    assert np.abs((b - p) - offsets[0]).mean() > 0.05
+    with pytest.raises(ValueError, match="perception.bias_m"):
+        config_from_dict({"perception": {"bias_m": -0.1}})
+
+
 def test_the_maps_heading_and_gate_after_are_off_until_the_gate_is_seen():
     """With a map heading error, a new target gate's passage direction is turned within ± the
     error while unseen and true once seen; the gate after is off by ± the map error throughout;
