@@ -125,6 +125,10 @@ class PerceptionNoiseConfig:
     """A persistent error per gate, as an estimator's near errors are (a gate's reads err the
     same way frame after frame, and the filter follows them): each target gate's detections are
     all off by one draw of N(0, this²) per axis, on top of the white noise above. 0: none."""
+    bias_share: float = 1.0
+    """The share of the training drones (the first of the batch: with ``map_share`` equal, the
+    same drones) that fly with ``bias_m``, so the others keep the flight on well-known gates.
+    1: all of them."""
 
 
 @dataclass(frozen=True)
@@ -290,6 +294,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("perception.map_yaw_error_deg", 0 <= c.perception.map_yaw_error_deg <= 180),
         ("perception.map_share", 0 <= c.perception.map_share <= 1),
         ("perception.bias_m", 0 <= c.perception.bias_m < 1),
+        ("perception.bias_share", 0 <= c.perception.bias_share <= 1),
         ("max_episode_s", c.max_episode_s is None or c.max_episode_s > 0),
     ]
     for name, ok in checks:

@@ -123,6 +123,7 @@ class PerceptionNoise:
         map_yaw_error_deg: float = 0.0,
         map_share: float = 1.0,
         bias_m: float = 0.0,
+        bias_share: float = 1.0,
     ) -> None:
         """``camera``: when given, gates outside its field of view are never seen;
         ``map_error_m``: a new target gate's first estimate is the truth moved uniformly within
@@ -133,9 +134,12 @@ class PerceptionNoise:
         share of the drones (the first of the batch) that fly with the map's errors, the others
         starting each gate from an ordinary detection (the same draws either way); ``bias_m``:
         every detection of a target gate is off by the same N(0, bias_m²) draw per axis, made
-        when the gate becomes the target (a stream of its own, so the other draws stand)."""
+        when the gate becomes the target (a stream of its own, so the other draws stand);
+        ``bias_share``: the share of the drones (the first of the batch, so with equal shares the
+        same drones as the map's errors) that fly with that bias."""
         self.model = model
         self.map_drones = np.arange(n) < round(map_share * n)
+        self.bias_drones = np.arange(n) < round(bias_share * n)
         self.camera = camera
         self.map_error_m = map_error_m
         self.map_yaw_error = np.radians(map_yaw_error_deg)
@@ -175,6 +179,7 @@ class PerceptionNoise:
             noise = np.where((switched & self.map_drones)[:, None], prior, noise)
         if self.bias_m > 0:
             draw = self.bias_rng.normal(size=(len(obs), 3)) * self.bias_m
+            draw *= self.bias_drones[:, None]
             self.bias = np.where(switched[:, None], draw, self.bias)
             noise = noise + self.bias
         self.est = np.where(seen[:, None], true_gate + noise, self.est)
@@ -209,11 +214,13 @@ class PerceptionNoiseVecEnv(VecEnvWrapper):
         map_yaw_error_deg: float = 0.0,
         map_share: float = 1.0,
         bias_m: float = 0.0,
+        bias_share: float = 1.0,
     ) -> None:
         super().__init__(venv)
         self.noise = PerceptionNoise(
-            model, venv.num_envs, seed, camera, map_error_m, map_yaw_error_deg, map_share, bias_m
-        )
+            model, venv.num_envs, seed, camera, map_error_m, map_yaw_error_deg, map_share,
+            bias_m, bias_share,
+        )  # fmt: skip
 
     def reset(self) -> np.ndarray:
         return self.noise.apply(self.venv.reset(), np.ones(self.num_envs, bool))

@@ -127,7 +127,7 @@ def make_train_env(
         venv = PerceptionNoiseVecEnv(
             venv, model, seed=seed + 7919, camera=camera, map_error_m=cfg.perception.map_error_m,
             map_yaw_error_deg=cfg.perception.map_yaw_error_deg, map_share=cfg.perception.map_share,
-            bias_m=cfg.perception.bias_m,
+            bias_m=cfg.perception.bias_m, bias_share=cfg.perception.bias_share,
         )  # fmt: skip
     features = features or run_features(cfg)
     venv = FeatureVecEnv(venv, features)

@@ -104,6 +104,24 @@ def test_a_gates_bias_holds_for_its_whole_approach_and_is_drawn_again_for_the_ne
         config_from_dict({"perception": {"bias_m": -0.1}})
 
 
+def test_only_the_bias_share_of_the_drones_flies_with_a_bias():
+    """``bias_share`` gives the per-gate bias to the first share of the batch only; the others
+    see exactly what they would without a bias."""
+    model = ErrorModel((0.0, 30.0), (0.01, 0.01), (0.0, 0.0))
+    n = 4000
+    ahead = np.tile([[5.0, 0.0, 0.0]], (n, 1))
+    half = PerceptionNoise(model, n, seed=0, camera=CameraParams(), bias_m=0.1, bias_share=0.25)
+    plain = PerceptionNoise(model, n, seed=0, camera=CameraParams())
+    new = np.ones(n, bool)
+    offset = (
+        half.apply(_obs(0.0, ahead), new)[:, 12:15] - plain.apply(_obs(0.0, ahead), new)[:, 12:15]
+    )
+    assert offset[: n // 4].std(axis=0) == pytest.approx(np.full(3, 0.1), rel=0.1)
+    assert offset[n // 4 :] == pytest.approx(np.zeros((n - n // 4, 3)), abs=1e-6)
+    with pytest.raises(ValueError, match="perception.bias_share"):
+        config_from_dict({"perception": {"bias_share": 1.5}})
+
+
 def test_the_maps_heading_and_gate_after_are_off_until_the_gate_is_seen():
     """With a map heading error, a new target gate's passage direction is turned within ± the
     error while unseen and true once seen; the gate after is off by ± the map error throughout;
