@@ -66,8 +66,10 @@ train-generalist: $(STAMP)
 	$(BIN)/icarus-vision average-policy runs/policy-racing-critic-tc4 --last 5
 	$(BIN)/icarus-vision train-policy --config configs/policy-racing-critic-view.toml --seed 0 --out runs/policy-racing-critic-view --timesteps 20000000
 	$(BIN)/icarus-vision average-policy runs/policy-racing-critic-view --last 5
-	cp runs/policy-racing-critic-view/average.json icarus_vision/models/policy/default.json
-	cp runs/policy-racing-critic-view/average.safetensors icarus_vision/models/policy/default.safetensors
+	$(BIN)/icarus-vision train-policy --config configs/policy-racing-bias.toml --seed 0 --out runs/policy-racing-bias --timesteps 20000000
+	$(BIN)/icarus-vision average-policy runs/policy-racing-bias --last 5
+	cp runs/policy-racing-bias/average.json icarus_vision/models/policy/default.json
+	cp runs/policy-racing-bias/average.safetensors icarus_vision/models/policy/default.safetensors
 
 # The shipped detector (models/detector/) from nothing, in its two parts (docs/detection.md).
 build-detector: $(STAMP)
@@ -76,8 +78,8 @@ build-detector: $(STAMP)
 	cp runs/detector-v5/detector/* icarus_vision/models/detector/
 
 # The shipped specialists (models/policy/<track>-specialist.*), side by side: grand-prix from the
-# shipped generalist (the average of its run's last five evaluations), split-s from `racing` (its
-# run's final policy.*). About 15 minutes on 2 cores.
+# generalist's twelfth part (runs/policy-racing-critic-view/average: run train-generalist first),
+# split-s from `racing` (its run's final policy.*). About 15 minutes on 2 cores.
 train-specialists: $(STAMP)
 	$(BIN)/icarus-vision train-policy --config configs/policy-specialist-grand-prix-v2.toml --seed 0 --out runs/specialist-grand-prix-v2 --timesteps 23511296 & \
 	$(BIN)/icarus-vision train-policy --config configs/policy-specialist-split-s.toml --seed 0 --out runs/specialist-split-s --max-minutes 15; wait
