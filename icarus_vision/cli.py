@@ -7,6 +7,7 @@ The commands are in ``icarus_vision/commands/``, one module each, imported at th
 from __future__ import annotations
 
 import functools
+import signal
 import sys
 from contextlib import ExitStack
 
@@ -42,6 +43,16 @@ def progress_reporter(stack: ExitStack, columns: tuple, transient: bool = False)
             state["bar"].update(state["task"], completed=done)
 
     return progress
+
+
+def stop_on_sigterm() -> None:
+    """Make SIGTERM (a scheduler or a session stopping the job) stop it as Ctrl-C does, so the
+    command saves what it has before it exits."""
+
+    def interrupt(signum, frame) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
 
 
 def user_errors(fn):

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 from rich.markup import escape
 
-from icarus_vision.cli import app, console, user_errors
+from icarus_vision.cli import app, console, stop_on_sigterm, user_errors
 
 
 @app.command("build-detector")
@@ -29,14 +29,15 @@ def build_detector_cmd(
     network, refiner, zoom stage and rescorer one on the other (each tunes its thresholds on
     val), add int8 copies and evaluate it, with no hand edits.
 
-    Resumable: run the same command again after Ctrl-C or a crash; finished steps are skipped
-    and an interrupted stage continues from its last epoch. OUT/build.json records each step's
-    time; OUT/detector is the finished checkpoint (--detector cnn:OUT/detector; copy its files
+    Resumable: run the same command again after Ctrl-C, SIGTERM or a crash; finished steps are
+    skipped and an interrupted stage continues from its last epoch. OUT/build.json records each
+    step's time over every run that worked on it; OUT/detector is the finished checkpoint (--detector cnn:OUT/detector; copy its files
     into icarus_vision/models/detector/ to ship it).
     """
     from icarus_vision.gate_detect.cnn.build import build_detector, load_build
 
     spec = load_build(config)
+    stop_on_sigterm()
     final = build_detector(spec, out, scale=scale, workers=workers, seed=seed,
                            log=lambda s: console.print(s, highlight=False))  # fmt: skip
     console.print(f"detector written to {escape(str(final))}", highlight=False)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 import time
 from dataclasses import replace
 from datetime import datetime
@@ -11,11 +10,7 @@ from pathlib import Path
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from icarus_vision.cli import app, console, user_errors
-
-
-def _raise_interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
+from icarus_vision.cli import app, console, stop_on_sigterm, user_errors
 
 
 @app.command("train-policy")
@@ -97,7 +92,7 @@ def train_policy_cmd(
                TextColumn("{task.fields[rate]} steps/s"), TextColumn("stage {task.fields[stage]} · {task.fields[gates]} gates · success {task.fields[success]}"),
                TimeElapsedColumn(), TimeRemainingColumn()]  # fmt: skip
     # SIGTERM (a scheduler stopping the job) saves a checkpoint exactly like Ctrl-C.
-    signal.signal(signal.SIGTERM, _raise_interrupt)
+    stop_on_sigterm()
     t0 = time.perf_counter()
     with Progress(*columns, console=console, transient=False) as bar:
         task = bar.add_task("PPO", total=total, rate="-", stage=0, gates="-", success="-")

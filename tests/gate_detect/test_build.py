@@ -4,6 +4,7 @@ after an interruption without redoing finished steps; bad build files are one-li
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import pytest
@@ -68,6 +69,7 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
     real = build._zoom
 
     def interrupted(*args, **kwargs):
+        time.sleep(0.5)  # a stage that ran a while before Ctrl-C
         raise KeyboardInterrupt
 
     monkeypatch.setattr(build, "_zoom", interrupted)
@@ -77,6 +79,7 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
     assert r.exit_code != 0
     done = json.loads((out / "build.json").read_text())["steps"]
     assert set(done) == {"dataset a", "dataset b", "corner", "refiner"}
+    assert json.loads((out / "build.json").read_text())["interrupted"]["zoom"] >= 0.5
     corner_weights = (out / "corner" / "best" / "model.safetensors").read_bytes()
 
     monkeypatch.setattr(build, "_zoom", real)
@@ -88,6 +91,9 @@ def test_a_detector_is_built_from_nothing_and_the_build_resumes(tmp_path, monkey
     assert (out / "corner" / "best" / "model.safetensors").read_bytes() == corner_weights
     steps = json.loads((out / "build.json").read_text())["steps"]
     assert list(steps)[-5:] == ["zoom", "rescorer", "detector", "quantize", "evaluate"]
+    assert "zoom: running (resumed after" in r.output
+    assert steps["zoom"]["seconds"] >= 0.5  # the interrupted run's time counts
+    assert json.loads((out / "build.json").read_text())["interrupted"] == {}
     meta = json.loads((out / "detector" / "detector.json").read_text())
     assert {"refine", "zoom", "rescore", "int8"} <= set(meta)
     config.write_text(config.read_text().replace("epochs = 2", "epochs = 3"))  # changed since

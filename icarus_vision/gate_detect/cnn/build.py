@@ -190,14 +190,25 @@ def build_detector(
     record["build"] = ident
     steps = record.setdefault("steps", {})
 
+    # A step stopped part-way (Ctrl-C, SIGTERM, an error) keeps the time it ran, so a finished
+    # step's seconds are its whole time over every session that worked on it.
+    partial = record.setdefault("interrupted", {})
+
     def step(name: str, fn: Callable[[], None]) -> None:
         if name in steps:
             log(f"{name}: done before ({steps[name]['seconds']:.0f} s)")
             return
-        log(f"{name}: running")
+        before = partial.get(name, 0.0)
+        log(f"{name}: running" + (f" (resumed after {before:.0f} s)" if before else ""))
         t0 = time.perf_counter()
-        fn()
-        steps[name] = {"seconds": round(time.perf_counter() - t0, 1)}
+        try:
+            fn()
+        except BaseException:
+            partial[name] = round(before + time.perf_counter() - t0, 1)
+            atomic_write_json(record_path, record)
+            raise
+        steps[name] = {"seconds": round(before + time.perf_counter() - t0, 1)}
+        partial.pop(name, None)
         atomic_write_json(record_path, record)
 
     data = {d.name: out / "datasets" / d.name for d in spec.datasets}
