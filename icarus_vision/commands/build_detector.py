@@ -31,8 +31,8 @@ def build_detector_cmd(
 
     Resumable: run the same command again after Ctrl-C, SIGTERM or a crash; finished steps are
     skipped and an interrupted stage continues from its last epoch. OUT/build.json records each
-    step's time over every run that worked on it; OUT/detector is the finished checkpoint (--detector cnn:OUT/detector; copy its files
-    into icarus_vision/models/detector/ to ship it).
+    step's time over every run that worked on it; OUT/detector is the finished checkpoint
+    (--detector cnn:OUT/detector; copy its files into icarus_vision/models/detector/ to ship it).
     """
     from icarus_vision.gate_detect.cnn.build import build_detector, load_build
 
