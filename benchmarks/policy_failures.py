@@ -1,7 +1,7 @@
 """Where a policy fails on race layouts: the gate it was flying to, by the gate's shape and place.
 
     .venv/bin/python benchmarks/policy_failures.py [--policy default] [--episodes 300]
-        [--seed 5000] [--gates 10] [--difficulty 1.0] [--no-randomize] [--json PATH]
+        [--seed 5000] [--gates 10] [--difficulty 1.0] [--no-randomize] [--lookahead] [--json PATH]
 
 Flies ``--episodes`` random race layouts (ground truth, randomisation on: the finish-rate setting of
 ``policy_speed.py``) and, for every gate the policy flew to, records whether it got through. Prints
@@ -22,6 +22,7 @@ from collections import defaultdict
 import numpy as np
 
 from icarus_vision.fileio import atomic_write_json
+from icarus_vision.policy.lookahead import Lookahead
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.rules import crossing_alignment
@@ -83,6 +84,10 @@ def main() -> None:
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--json", default=None)
     ap.add_argument(
+        "--lookahead", action="store_true",
+        help="fly the policy through the look-ahead safety filter (policy/lookahead.py)",
+    )  # fmt: skip
+    ap.add_argument(
         "--no-randomize", action="store_true",
         help="nominal quadrotor, no wind, gates where the layout puts them (what randomisation costs)",
     )  # fmt: skip
@@ -96,6 +101,7 @@ def main() -> None:
     env = BatchedRacingVecEnv(a.episodes, cfg)
     env.seed(a.seed)
     obs = env.reset()
+    pilot = Lookahead(policy, cfg) if a.lookahead else None
     tracks = list(env.core.tracks)
     results: list[dict | None] = [None] * a.episodes
     crossings: list[list[float]] = [[] for _ in range(a.episodes)]  # angle at each gate passed
@@ -106,7 +112,9 @@ def main() -> None:
         angle = np.degrees(np.arccos(np.clip(
             crossing_alignment(np.zeros_like(vel), vel, core.g_yaw[rows, target]), -1.0, 1.0
         )))  # fmt: skip
-        obs, _, done, infos = env.step(policy.act(obs))
+        live = np.array([r is None for r in results])
+        action = policy.act(obs) if pilot is None else pilot.act(core, env.state, obs, live)
+        obs, _, done, infos = env.step(action)
         for i in np.flatnonzero((core.target != target) & ~done):
             if results[i] is None:
                 crossings[i].append(angle[i])
@@ -149,11 +157,12 @@ def main() -> None:
             if which == "next":
                 cross_hit.append(r["last_angle"])
     n_ok = sum(r["success"] for r in results)
-    print(f"policy {a.policy}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)")
+    filtered = " with the look-ahead filter" if a.lookahead else ""
+    print(f"policy {a.policy}{filtered}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)")
     print("failed episodes by ending:", dict(reasons))
     print("gate collisions by the gate hit:", dict(hit))
     report = {
-        "finished": n_ok, "episodes": a.episodes, "endings": dict(reasons),
+        "finished": n_ok, "episodes": a.episodes, "lookahead": a.lookahead, "endings": dict(reasons),
         "gate_hit": dict(hit), "per_gate": {},
     }  # fmt: skip
     for name in BUCKETS:

@@ -47,6 +47,13 @@ def eval_policy_cmd(
     randomize: bool = typer.Option(
         False, "--randomize/--no-randomize", help="Domain randomisation."
     ),
+    lookahead: bool = typer.Option(
+        False,
+        "--lookahead/--no-lookahead",
+        help="Fly the policy through the look-ahead safety filter: each step the next 0.6 s are "
+        "predicted in the nominal quadrotor model, and where the policy's own flight would crash "
+        "the clearest of 25 corrected actions is flown instead.",
+    ),
     seed: int = typer.Option(0, help="Random seed."),
     json_path: Path = typer.Option(None, "--json", help="Write the results to this JSON file."),
 ) -> None:
@@ -66,11 +73,13 @@ def eval_policy_cmd(
     quad_params = None if quad is None else load_quad(quad)
     pilot = resolve_policy(policy, track=base)
     r = evaluate_policy(pilot, track, episodes=episodes, num_gates=gates, backend=backend,
-                        randomize=randomize, seed=seed, difficulty=difficulty, quad=quad_params)  # fmt: skip
+                        randomize=randomize, seed=seed, difficulty=difficulty, quad=quad_params,
+                        lookahead=lookahead)  # fmt: skip
     r.update(time_optimal_fields(base, r["lap_time_s"]["median"], solve=plan, quad=quad_params))
     if json_path is not None:  # results first: nothing printed below can lose them
         atomic_write_json(json_path, r)
-    table = Table(title=f"eval-policy: {r['policy']} on {r['track']} ({r['backend']})")
+    filtered = ", look-ahead" if r["lookahead"] else ""
+    table = Table(title=f"eval-policy: {r['policy']} on {r['track']} ({r['backend']}{filtered})")
     table.add_column("metric")
     table.add_column("value")
     lt = r["lap_time_s"]

@@ -6,6 +6,7 @@ import numpy as np
 
 from icarus_vision.policy.callbacks import episode_success
 from icarus_vision.policy.export import ExportedPolicy
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
@@ -15,12 +16,17 @@ from icarus_vision.sim.track import Track
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
 
-def _pilot(policy: ExportedPolicy | str, env):
+def _pilot(policy: ExportedPolicy | str, env, lookahead: LookaheadConfig | None = None):
+    """``f(obs, live) -> actions`` for the drones of ``env`` (live: still racing, or None)."""
+    if isinstance(policy, ExportedPolicy) and lookahead is not None:
+        filt = Lookahead(policy, env.config, lookahead)
+        env = getattr(env, "unwrapped", env)
+        return lambda obs, live=None: filt.act(env.core, env.state, obs, live)
     if isinstance(policy, ExportedPolicy):
-        return lambda obs: policy.act(obs)
+        return lambda obs, live=None: policy.act(obs)
     if policy == "scripted":
         ctrl = ScriptedController(env.config.quad if hasattr(env, "config") else None)
-        return lambda obs: ctrl.act_env(env, obs)
+        return lambda obs, live=None: ctrl.act_env(env, obs)
     raise ValueError(f"unknown policy {policy!r}")
 
 
@@ -55,6 +61,7 @@ def evaluate_policy(
     seed: int = 0,
     difficulty: float | None = None,
     quad: QuadParams | None = None,
+    lookahead: bool | LookaheadConfig = False,
 ) -> dict:
     """Fly ``episodes`` episodes and report success, crashes, gates, lap times and speeds.
 
@@ -68,6 +75,8 @@ def evaluate_policy(
         difficulty: random tracks only: None draws classic ``random_track`` layouts, a value in
             [0, 1] ``race_track`` layouts of that difficulty.
         quad: the quadrotor (None: the built-in racer-500g).
+        lookahead: fly the policy through the look-ahead safety filter (``policy.lookahead``;
+            True: its default settings). Exported policies only.
 
     Returns:
         The eval-policy JSON fields of ARCHITECTURE.md plus crash reasons and mean speed.
@@ -83,16 +92,19 @@ def evaluate_policy(
     check_backend(backend)
     if isinstance(policy, ExportedPolicy):
         policy.check_quad(cfg.quad, "this evaluation")
+    elif lookahead:
+        raise ValueError("--lookahead filters an exported policy, not the scripted controller")
+    la = (LookaheadConfig() if lookahead is True else lookahead) or None
     if backend == "batched":
-        results = _run_batched(policy, cfg, episodes, seed)
+        results = _run_batched(policy, cfg, episodes, seed, la)
     else:
-        results = _run_sequential(policy, cfg, episodes, seed, backend)
+        results = _run_sequential(policy, cfg, episodes, seed, backend, la)
     name = policy.name if isinstance(policy, ExportedPolicy) else policy
     track_name = base.name if base is not None else f"random-{num_gates}"
     if base is None and difficulty is not None:
         track_name = f"race-{num_gates}-d{difficulty:g}"
     return {"policy": name, "track": track_name, "backend": backend, "randomize": randomize,
-            "seed": seed, **_summary(results)}  # fmt: skip
+            "seed": seed, "lookahead": la is not None, **_summary(results)}  # fmt: skip
 
 
 def time_optimal_fields(
@@ -134,17 +146,17 @@ def _episode(info: dict, speeds: list[float]) -> dict:
     }  # fmt: skip
 
 
-def _run_batched(policy, cfg: EnvConfig, episodes: int, seed: int) -> list[dict]:
+def _run_batched(policy, cfg: EnvConfig, episodes: int, seed: int, lookahead=None) -> list[dict]:
     env = BatchedRacingVecEnv(episodes, cfg)
     env.seed(seed)
     obs = env.reset()
-    act = _pilot(policy, env)
+    act = _pilot(policy, env, lookahead)
     results: list[dict | None] = [None] * episodes
     speed_sum, speed_max, steps = np.zeros(episodes), np.zeros(episodes), np.zeros(episodes)
-    while any(r is None for r in results):
-        obs, _, done, infos = env.step(act(obs))
+    live = np.ones(episodes, dtype=bool)
+    while live.any():
+        obs, _, done, infos = env.step(act(obs, live))
         v = np.linalg.norm(env.state.vel, axis=1)
-        live = np.array([r is None for r in results])
         speed_sum += v * live
         speed_max = np.where(live, np.maximum(speed_max, v), speed_max)
         steps += live
@@ -156,12 +168,15 @@ def _run_batched(policy, cfg: EnvConfig, episodes: int, seed: int) -> list[dict]
                     float(speed_sum[i] / steps[i]),
                 )
                 results[i] = r
+        live = np.array([r is None for r in results])
     return results  # type: ignore[return-value]
 
 
-def _run_sequential(policy, cfg: EnvConfig, episodes: int, seed: int, backend: str) -> list[dict]:
+def _run_sequential(
+    policy, cfg: EnvConfig, episodes: int, seed: int, backend: str, lookahead=None
+) -> list[dict]:
     env = make_env(backend, config=cfg)
-    act = _pilot(policy, env)
+    act = _pilot(policy, env, lookahead)
     results = []
     try:
         for k in range(episodes):

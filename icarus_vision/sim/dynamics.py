@@ -264,6 +264,7 @@ def step_substeps(
     dt: float,
     substeps: int,
     ground_clamp: np.ndarray | None = None,
+    accel: np.ndarray | None = None,
 ) -> np.ndarray:
     """Advance N drones in place by ``substeps`` physics steps of ``dt``.
 
@@ -272,6 +273,8 @@ def step_substeps(
         thrust_cmd: (N,) N; rate_cmd: (N, 3) rad/s; wind: (N, 3) world air velocity, m/s.
         ground_clamp: (N,) bool; where True the drone rests on the ground (z >= radius) instead of
             sinking through it (used before take-off).
+        accel: (N, 3) world acceleration added to every sub-step, m/s² (a model's estimate of
+            what it does not know; None: nothing).
 
     Returns:
         (substeps, N, 3) positions after each sub-step (for collision checks).
@@ -279,6 +282,8 @@ def step_substeps(
     k = lag_gain(dt, params.motor_tau)
     inv_m = 1.0 / params.mass[:, None]
     g = np.array([0.0, 0.0, -GRAVITY])
+    if accel is not None:
+        g = g + accel
     trail = np.empty((substeps, state.pos.shape[0], 3))
     for s in range(substeps):
         state.thrust += (thrust_cmd - state.thrust) * k

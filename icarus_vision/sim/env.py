@@ -143,8 +143,10 @@ class BatchedDroneRacingEnv(DroneRacingEnv):
         return integrate_batched(self.core, self.state, thrust_cmd, rate_cmd, wind)
 
 
-def integrate_batched(core: RaceCore, state: QuadState, thrust_cmd, rate_cmd, wind):
+def integrate_batched(core: RaceCore, state: QuadState, thrust_cmd, rate_cmd, wind, accel=None):
     """Numpy physics of one control step for all drones of ``core``, with analytic collisions.
+
+    ``accel`` (N, 3): an extra world acceleration, m/s² (``dynamics.step_substeps``).
 
     Returns:
         trail (S, N, 3), frame_hit (N,), ground_hit (N,).
@@ -160,6 +162,7 @@ def integrate_batched(core: RaceCore, state: QuadState, thrust_cmd, rate_cmd, wi
         dt,
         cfg.substeps,
         ground_clamp=~core.taken_off,
+        accel=accel,
     )
     frame_hit = core.frame_collision(trail)
     ground_hit = (trail[:, :, 2] < core.params.radius).any(axis=0)

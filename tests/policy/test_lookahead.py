@@ -1,0 +1,122 @@
+"""The look-ahead safety filter: leaves a clear flight alone, averts a predicted crash, learns the
+disturbance its model misses, and flies evaluations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from icarus_vision.policy.evaluate import evaluate_policy
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, candidate_offsets
+from icarus_vision.policy.pilots import resolve_policy
+from icarus_vision.sim import dynamics
+from icarus_vision.sim.config import EnvConfig
+from icarus_vision.sim.quad import GRAVITY, QuadParams
+from icarus_vision.sim.vec_env import BatchedRacingVecEnv
+
+
+class ConstantPilot:
+    """A stand-in policy: the same action whatever it sees."""
+
+    def __init__(self, action) -> None:
+        self.action = np.asarray(action, dtype=np.float32)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        return np.tile(self.action, (len(obs), 1))
+
+
+def hover_thrust(quad: QuadParams) -> float:
+    return 2 * quad.mass * GRAVITY / quad.thrust_max - 1
+
+
+def test_candidates_start_with_the_policy_alone():
+    offs = candidate_offsets((0.25, 1.0))
+    assert offs.shape == (17, 4)
+    assert not offs[0].any()
+    assert (np.count_nonzero(offs[1:], axis=1) == 1).all()
+    assert sorted(np.abs(offs[1:]).max(axis=1)) == [0.25] * 8 + [1.0] * 8
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"horizon_s": 0}, {"offset_s": 1.0}, {"amplitudes": ()}, {"amplitudes": (3.0,)},
+     {"disturbance_gain": 1.5}],
+)  # fmt: skip
+def test_bad_settings_are_refused(kwargs):
+    with pytest.raises(ValueError):
+        LookaheadConfig(**kwargs)
+
+
+def test_a_clear_flight_is_flown_unchanged():
+    policy = resolve_policy("default")
+    env = BatchedRacingVecEnv(4, EnvConfig(track="grand-prix", observation=policy.observation))
+    env.seed(0)
+    obs = env.reset()
+    filt = Lookahead(policy, env.config)
+    for _ in range(25):
+        action = filt.act(env.core, env.state, obs)
+        np.testing.assert_array_equal(action, policy.act(obs))
+        obs, *_ = env.step(action)
+    assert filt.interventions == 0
+
+
+def test_a_predicted_crash_is_averted():
+    """Falling from 1.2 m with the motors idle hits the ground within the horizon; the filter
+    flies the candidate that crashes latest, full thrust."""
+    cfg = EnvConfig(track="grand-prix")
+    env = BatchedRacingVecEnv(1, cfg)
+    env.seed(0)
+    obs = env.reset()
+    env.state.pos[0, 2] = 1.2
+    env.core.taken_off[:] = True
+    obs = env.core.observe(env.state)
+    filt = Lookahead(ConstantPilot([-1, 0, 0, 0]), cfg)
+    action = filt.act(env.core, env.state, obs)
+    assert action[0, 0] == pytest.approx(0.0)  # -1 + the largest thrust offset
+    np.testing.assert_array_equal(action[0, 1:], 0.0)
+    assert filt.interventions == 1
+    # a drone not racing any more is left alone
+    action = filt.act(env.core, env.state, obs, live=np.zeros(1, dtype=bool))
+    assert action[0, 0] == -1.0
+
+
+def test_the_disturbance_the_model_misses_is_estimated():
+    """Wind the model does not know pushes a level drone by drag · wind / mass."""
+    quad = QuadParams()
+    cfg = EnvConfig(track="grand-prix")
+    env = BatchedRacingVecEnv(1, cfg)
+    env.seed(0)
+    obs = env.reset()
+    env.state.pos[0, 2] = 3.0
+    env.core.taken_off[:] = True
+    wind = np.array([2.0, -1.0, 0.0])
+    env.core.wind_const[0] = wind
+    filt = Lookahead(ConstantPilot([hover_thrust(quad), 0, 0, 0]), cfg,
+                     LookaheadConfig(horizon_s=0.04, offset_s=0.02, disturbance_gain=0.3))  # fmt: skip
+    for _ in range(30):
+        obs, *_ = env.step(filt.act(env.core, env.state, obs))
+    expected = np.array(quad.drag) * wind / quad.mass
+    np.testing.assert_allclose(filt._accel[0], expected, atol=0.05 * np.abs(expected).max())
+
+
+def test_the_model_takes_an_extra_acceleration():
+    params = dynamics.QuadBatchParams.from_quad(QuadParams(), 2)
+    state = dynamics.QuadState.zeros(2)
+    state.pos[:, 2] = 5.0
+    accel = np.array([[0.0, 0.0, GRAVITY], [1.0, 0.0, 0.0]])
+    dynamics.step_substeps(state, np.zeros(2), np.zeros((2, 3)), np.zeros((2, 3)), params,
+                           0.01, 10, accel=accel)  # fmt: skip
+    np.testing.assert_allclose(state.vel[0], 0.0, atol=1e-12)  # gravity cancelled
+    assert state.vel[1, 0] == pytest.approx(0.1, rel=0.05)  # less the drag
+    assert state.vel[1, 2] == pytest.approx(-GRAVITY * 0.1, rel=0.05)
+
+
+def test_evaluate_policy_flies_through_the_filter():
+    policy = resolve_policy("default")
+    r = evaluate_policy(policy, episodes=3, num_gates=3, difficulty=0.5, randomize=True, seed=1,
+                        lookahead=True)  # fmt: skip
+    assert r["lookahead"] is True and r["episodes"] == 3
+    plain = evaluate_policy(policy, episodes=3, num_gates=3, difficulty=0.5, randomize=True, seed=1)
+    assert plain["lookahead"] is False
+    with pytest.raises(ValueError, match="scripted"):
+        evaluate_policy("scripted", episodes=1, num_gates=2, lookahead=True)
