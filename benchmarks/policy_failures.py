@@ -158,7 +158,9 @@ def main() -> None:
                 cross_hit.append(r["last_angle"])
     n_ok = sum(r["success"] for r in results)
     filtered = " with the look-ahead filter" if a.lookahead else ""
-    print(f"policy {a.policy}{filtered}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)")
+    print(
+        f"policy {a.policy}{filtered}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)"
+    )
     print("failed episodes by ending:", dict(reasons))
     print("gate collisions by the gate hit:", dict(hit))
     report = {

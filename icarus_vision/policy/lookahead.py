@@ -81,7 +81,10 @@ class Lookahead:
         self.policy = policy
         self.config = config or LookaheadConfig()
         self.cfg = replace(
-            cfg, randomization=RandomizationConfig(enabled=False), layout_replay=0.0, crash_replay=0.0
+            cfg,
+            randomization=RandomizationConfig(enabled=False),
+            layout_replay=0.0,
+            crash_replay=0.0,
         )
         self.horizon = max(1, round(self.config.horizon_s * cfg.ctrl_hz))
         self.hold = max(1, min(self.horizon, round(self.config.offset_s * cfg.ctrl_hz)))
@@ -98,7 +101,11 @@ class Lookahead:
         self._accel = self._pred_vel = self._t = None
 
     def act(
-        self, core: RaceCore, state: dynamics.QuadState, obs: np.ndarray, live: np.ndarray | None = None
+        self,
+        core: RaceCore,
+        state: dynamics.QuadState,
+        obs: np.ndarray,
+        live: np.ndarray | None = None,
     ) -> np.ndarray:
         """Actions for the drones of ``core``.
 
@@ -155,7 +162,9 @@ class Lookahead:
         k = len(offsets)
         model = self._model(src, idx, k)
         rep = lambda a: np.repeat(a[idx], k, axis=0)  # noqa: E731
-        s = dynamics.QuadState(*(rep(a) for a in (state.pos, state.vel, state.quat, state.omega, state.thrust)))
+        s = dynamics.QuadState(
+            *(rep(a) for a in (state.pos, state.vel, state.quat, state.omega, state.thrust))
+        )
         accel = None if self._accel is None else rep(self._accel)
         offset = np.tile(offsets, (idx.size, 1))
         x = np.repeat(obs[idx], k, axis=0)
@@ -177,7 +186,12 @@ class Lookahead:
                 break
             x = model.observe(s, model.last_rpy)
         shape = (idx.size, k)
-        return crash_step.reshape(shape), model.target.reshape(shape), ret.reshape(shape), first.reshape(*shape, 4)
+        return (
+            crash_step.reshape(shape),
+            model.target.reshape(shape),
+            ret.reshape(shape),
+            first.reshape(*shape, 4),
+        )
 
     @staticmethod
     def _step(model: RaceCore, state, action, accel):
@@ -186,7 +200,9 @@ class Lookahead:
         trail, frame_hit, ground_hit = integrate_batched(
             model, state, thrust_cmd, rate_cmd, model.wind(), accel
         )
-        reward, _, _, crash, _ = model.finish_step(p0, state, frame_hit, ground_hit, trail, action=action)
+        reward, _, _, crash, _ = model.finish_step(
+            p0, state, frame_hit, ground_hit, trail, action=action
+        )
         return reward, crash >= 0, model.target >= model.n_pass
 
     # -- disturbance ---------------------------------------------------------------------------
