@@ -6,6 +6,7 @@
         [--policy auto] [--json PATH]
     .venv/bin/python benchmarks/race_policy.py vision [--tracks 140] [--difficulty 1.0]
         [--policy default] [--json PATH]
+    (each with ``--lookahead``: through the look-ahead safety filter, as ``race --lookahead``)
 
 ``builtin``: every built-in track, `race --randomize --detector cnn --policy default` (the
 generalist; ``--policy auto`` flies the shipped specialists where there are some) on
@@ -58,12 +59,12 @@ def _summary(reports: list[dict]) -> dict:
 
 def builtin(
     seeds: int, detector: str, policy: str = "default", backend: str = "pybullet",
-    recipe: str | None = "gates-v1",
+    recipe: str | None = "gates-v1", lookahead: bool = False,
 ) -> dict:  # fmt: skip
     out = {}
     for name in BUILTIN_TRACKS:
         reports = [run_race(name, detector=detector, policy=policy, seed=s, randomize=True, recipe=recipe,
-                            backend=backend).report
+                            backend=backend, lookahead=lookahead).report
                    for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
         out[name] = _summary(reports)
         print(name, out[name], flush=True)
@@ -76,11 +77,13 @@ def specialists(
     recipe: str | None = "gates-v1",
     policy: str = "auto",
     tracks: tuple[str, ...] = ("grand-prix", "split-s"),
+    lookahead: bool = False,
 ) -> dict:
     out = {}
     for name in tracks:
         for det in ("oracle", "cnn"):
-            reports = [run_race(name, detector=det, policy=policy, seed=s, randomize=True, recipe=recipe).report
+            reports = [run_race(name, detector=det, policy=policy, seed=s, randomize=True, recipe=recipe,
+                                lookahead=lookahead).report
                        for s in range(SEED0, SEED0 + seeds)]  # fmt: skip
             out[f"{name}/{det}"] = _summary(reports)
             print(name, det, out[f"{name}/{det}"], flush=True)
@@ -89,20 +92,26 @@ def specialists(
 
 def vision_race(
     i: int, detector: str, policy: str, difficulty: float = 1.0,
-    recipe: str | None = "gates-v1", open_loop: bool = False,
+    recipe: str | None = "gates-v1", open_loop: bool = False, lookahead: bool = False,
 ) -> RaceResult:  # fmt: skip
     """The race loop's ``i``-th race: layout ``race_track(10, 3000 + i)``, seed 100 + i,
     randomised (also flown open loop by ``estimator_races.py``)."""
     return run_race(race_track(10, 3000 + i, difficulty=difficulty), detector=detector, policy=policy,
-                    seed=SEED0 + i, randomize=True, recipe=recipe, open_loop=open_loop)  # fmt: skip
+                    seed=SEED0 + i, randomize=True, recipe=recipe, open_loop=open_loop,
+                    lookahead=lookahead)  # fmt: skip
 
 
 def vision(
-    tracks: int, difficulty: float, policy: str = "default", recipe: str | None = "gates-v1"
+    tracks: int,
+    difficulty: float,
+    policy: str = "default",
+    recipe: str | None = "gates-v1",
+    lookahead: bool = False,
 ) -> dict:
     out = {}
     for det in ("oracle", "cnn"):
-        reports = [vision_race(i, det, policy, difficulty, recipe).report for i in range(tracks)]
+        reports = [vision_race(i, det, policy, difficulty, recipe, lookahead=lookahead).report
+                   for i in range(tracks)]  # fmt: skip
         out[det] = _summary(reports)
         print(det, out[det], flush=True)
     out["gap_points"] = round(100 * (out["oracle"]["finish_rate"] - out["cnn"]["finish_rate"]), 1)
@@ -124,20 +133,23 @@ def main() -> None:
     ap.add_argument("--backend", default="pybullet", help="builtin: the physics backend")
     ap.add_argument("--recipe", default="gates-v1",
                     help="the look race --randomize draws (gates-v1, gates-v3, a path, or none)")  # fmt: skip
+    ap.add_argument("--lookahead", action="store_true",
+                    help="fly through the look-ahead safety filter (race --lookahead)")  # fmt: skip
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     policy = args.policy or ("auto" if args.what == "specialists" else "default")
     recipe = None if args.recipe == "none" else args.recipe
     t0 = time.perf_counter()
     if args.what == "builtin":
-        out = builtin(args.seeds, args.detector, policy, args.backend, recipe)
+        out = builtin(args.seeds, args.detector, policy, args.backend, recipe, args.lookahead)
         out["backend"], out["policy_asked"] = args.backend, policy
     elif args.what == "specialists":
         tracks = tuple(args.track or ("grand-prix", "split-s"))
-        out = specialists(args.seeds, recipe, policy, tracks)
+        out = specialists(args.seeds, recipe, policy, tracks, args.lookahead)
         out["policy_asked"] = policy
     else:
-        out = vision(args.tracks, args.difficulty, policy, recipe)
+        out = vision(args.tracks, args.difficulty, policy, recipe, args.lookahead)
+    out["lookahead"] = args.lookahead
     out["wall_s"], out["recipe"] = round(time.perf_counter() - t0, 1), recipe
     print(json.dumps(out, indent=1))
     if args.json:

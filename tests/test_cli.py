@@ -224,3 +224,16 @@ def test_sigterm_stops_a_long_command_as_ctrl_c_does():
             time.sleep(5)  # the handler runs at once: never reached
     finally:
         signal.signal(signal.SIGTERM, old)
+
+
+def test_eval_policy_and_race_take_the_lookahead_filter(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, ["eval-policy", "--episodes", "2", "--gates", "2", "--lookahead",
+                              "--json", "e.json"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "look-ahead" in res.output
+    assert json.loads((tmp_path / "e.json").read_text())["lookahead"] is True
+    res = runner.invoke(app, ["race", "--track", "single-gate", "--detector", "oracle", "--lookahead",
+                              "--no-video", "--json", "r.json", "--out", "r"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "r.json").read_text())["policy"] == "default+lookahead"

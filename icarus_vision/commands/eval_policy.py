@@ -52,7 +52,7 @@ def eval_policy_cmd(
         "--lookahead/--no-lookahead",
         help="Fly the policy through the look-ahead safety filter: each step the next 0.6 s are "
         "predicted in the nominal quadrotor model, and where the policy's own flight would crash "
-        "the clearest of 25 corrected actions is flown instead.",
+        "the clearest of 40 corrected actions is flown instead.",
     ),
     seed: int = typer.Option(0, help="Random seed."),
     json_path: Path = typer.Option(None, "--json", help="Write the results to this JSON file."),

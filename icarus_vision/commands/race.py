@@ -47,6 +47,14 @@ def race_cmd(
         "LEDs, sensor effects; gates-v4: gates-v3 with glossy hall floors; or a recipe TOML path). The camera stays the --quad file's.",
     ),
     latency: int = typer.Option(1, min=0, help="Perception latency in camera frames."),
+    lookahead: bool = typer.Option(
+        False,
+        "--lookahead/--no-lookahead",
+        help="Fly the policy through the look-ahead safety filter: each step the next 0.6 s are "
+        "predicted in the nominal quadrotor model, on the gates as vision knows them, and where "
+        "the policy's own flight would crash the clearest of 40 corrected actions is flown instead "
+        "(the report's policy reads NAME+lookahead).",
+    ),
     video: Path = typer.Option(None, help="Video path (default: OUT/race.mp4)."),
     no_video: bool = typer.Option(False, "--no-video", help="Skip the video (faster)."),
     json_path: Path = typer.Option(None, "--json", help="Also write the report to this JSON file."),
@@ -70,7 +78,7 @@ def race_cmd(
     want_video = not no_video
     result = run_race(track, quad=quad_params, laps=laps, seed=seed, detector=detector, policy=policy,
                       backend=backend, randomize=randomize, latency_frames=latency, video=want_video,
-                      recipe=recipe)  # fmt: skip
+                      recipe=recipe, lookahead=lookahead)  # fmt: skip
     out = out or Path("runs") / f"race-{datetime.now():%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
     r = result.report

@@ -130,6 +130,17 @@ class GateEstimator:
         j = min(self.target + 1, len(self.passage_gate) - 1)
         return self._heading(self.passage_gate[j], self.passage_yaw[j])
 
+    def passage_map(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Map-aided: every passage's estimated world position (M, 3) and passage heading (M,),
+        rad, as vision has corrected the prior so far; None in map-free mode."""
+        if self.config.mode != "map-aided" or not self.passage_gate:
+            return None
+        pos = np.array([self.tracks[g].pos for g in self.passage_gate])
+        yaw = np.array(
+            [self._heading(g, y) for g, y in zip(self.passage_gate, self.passage_yaw, strict=True)]
+        )
+        return pos, yaw
+
     # -- prediction and gate switching ---------------------------------------------------------
     def _advance(self, odom: OdometryReading) -> None:
         check_odometry(odom)

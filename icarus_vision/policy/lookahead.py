@@ -39,7 +39,7 @@ class LookaheadConfig:
     """Seconds of flight predicted each control step."""
     offset_s: float = 0.2
     """How long a candidate's offset is held before the policy flies on alone."""
-    amplitudes: tuple[float, ...] = (0.25, 0.5, 1.0)
+    amplitudes: tuple[float, ...] = (0.25, 0.5, 1.0, 1.5, 2.0)
     """Offsets tried on each action axis, both signs (action units; actions stay in [-1, 1])."""
     disturbance_gain: float = 0.2
     """Low-pass gain per control step of the disturbance estimate (0: none estimated)."""

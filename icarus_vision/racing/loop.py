@@ -12,6 +12,7 @@ position, so perception errors can be told apart from control errors.
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -24,7 +25,7 @@ from icarus_vision.gate_detect.base import Detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.render.camera import Camera
 from icarus_vision.render.randomize import Visuals, apply_sensor_noise
-from icarus_vision.sim.dynamics import quat_to_rpy
+from icarus_vision.sim.dynamics import QuadState, quat_to_rpy
 from icarus_vision.sim.observation import OBS_DIMS, heading_vectors
 from icarus_vision.sim.track import Track
 
@@ -92,7 +93,7 @@ def observation_from(od, rel_world: np.ndarray, extra: np.ndarray | None = None)
 def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Camera, scene, seed: int,
              prior: Track, latency_frames: int = 1, on_frame=None,
              estimator: EstimatorConfig | None = None, look: Visuals | None = None,
-             open_loop: bool = False) -> LoopRecord:  # fmt: skip
+             open_loop: bool = False, lookahead=None) -> LoopRecord:  # fmt: skip
     """Fly one episode of a single-drone env (already reset) with perception in the loop.
 
     Args:
@@ -158,7 +159,14 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
                 obs = observation_from(od, per.estimate.rel_world, extra)
         on_truth = oracle or open_loop
         gate_yaw = float(core.target_gate()[1][0]) if on_truth else per.estimate.yaw
-        obs_full, _, term, trunc, info = env.step(pilot(obs, gate_yaw))
+        if lookahead is None:
+            action = pilot(obs, gate_yaw)
+        elif on_truth:
+            action = lookahead.act(core, env.state, obs[None])[0]
+        else:
+            belief = believed_race(core, per.estimator, per.estimate, od, prior)
+            action = lookahead.act(belief, odometry_state(od, env.state), obs[None])[0]
+        obs_full, _, term, trunc, info = env.step(action)
         truth_obs = obs_full
         rec.t.append(float(core.t[0]))
         rec.pos.append(env.state.pos[0].copy())
@@ -166,6 +174,35 @@ def fly_loop(env, pilot, obs_dim: int, *, detector: str | Detector, camera: Came
         if term or trunc:
             rec.info = info
             return rec
+
+
+def believed_race(core, estimator, estimate, od, prior: Track):
+    """The race of a single-drone ``core`` as the drone knows it: every gate where the
+    estimator's map puts it (map-free: the prior), the next one where the estimate puts it."""
+    belief = copy.copy(core)  # shares the clocks and counters; the gate arrays below are new
+    mapped = estimator.passage_map() if hasattr(estimator, "passage_map") else None
+    if mapped is None:
+        mapped = (
+            np.array([g.pos for g in prior.passages], float),
+            np.array([g.yaw for g in prior.passages]),
+        )
+    pos, yaw = mapped
+    m = min(len(pos), core.g_pos.shape[1])
+    belief.g_pos, belief.g_yaw = core.g_pos.copy(), core.g_yaw.copy()
+    belief.g_pos[0, :m], belief.g_yaw[0, :m] = pos[:m], yaw[:m]
+    j = int(core.target[0])
+    if j < m:
+        belief.g_pos[0, j] = np.asarray(od.pos) + estimate.rel_world
+        belief.g_yaw[0, j] = estimate.yaw
+    belief.g_cos, belief.g_sin = np.cos(belief.g_yaw), np.sin(belief.g_yaw)
+    return belief
+
+
+def odometry_state(od, truth: QuadState) -> QuadState:
+    """A one-drone state from an odometry reading (the motors' thrust from their telemetry)."""
+    return QuadState(np.asarray(od.pos, float)[None], np.asarray(od.vel, float)[None],
+                     np.asarray(od.quat, float)[None], np.asarray(od.omega, float)[None],
+                     truth.thrust.copy())  # fmt: skip
 
 
 def camera_rate(env) -> float:

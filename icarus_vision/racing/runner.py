@@ -15,6 +15,7 @@ import numpy as np
 from icarus_vision.estimator.config import config_for_detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.policy.export import ExportedPolicy
+from icarus_vision.policy.lookahead import Lookahead
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.racing.loop import LoopRecord, fly_loop
@@ -93,6 +94,7 @@ def run_race(
     video: bool = False,
     recipe: str | None = "gates-v1",
     open_loop: bool = False,
+    lookahead: bool = False,
 ) -> RaceResult:
     """Fly ``track`` once with camera, detector, estimator and pilot in the loop.
 
@@ -112,6 +114,8 @@ def run_race(
         video: keep composed video frames (FPV with detections beside a top view).
         open_loop: the pilot flies on the truth while camera, detector and estimator run and are
             recorded (``RaceResult.loop``): perception measured on the oracle's flight.
+        lookahead: fly the policy through the look-ahead safety filter (``policy.lookahead``);
+            the report's ``policy`` then reads ``NAME+lookahead``.
     """
     check_backend(backend)
     if latency_frames < 0:
@@ -129,6 +133,8 @@ def run_race(
     pilot_spec = resolve_policy(policy, track=base)
     if isinstance(pilot_spec, ExportedPolicy):
         pilot_spec.check_quad(quad)
+    elif lookahead:
+        raise ValueError("--lookahead filters an exported policy, not the scripted controller")
     ghost = planned_ghost(base, quad)
     obs_mode = pilot_spec.observation if isinstance(pilot_spec, ExportedPolicy) else "basic"
     cfg = EnvConfig(
@@ -169,7 +175,8 @@ def run_race(
 
         rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector_obj or detector, camera=camera,
                        scene=scene, seed=seed, prior=base, latency_frames=latency_frames, on_frame=on_frame,
-                       estimator=config_for_detector(det_name), look=look, open_loop=open_loop)  # fmt: skip
+                       estimator=config_for_detector(det_name), look=look, open_loop=open_loop,
+                       lookahead=Lookahead(pilot_spec, cfg) if lookahead else None)  # fmt: skip
     finally:
         env.close()
         if scene is not None:
@@ -189,6 +196,8 @@ def run_race(
         },
     }
     policy_name = pilot_spec.name if isinstance(pilot_spec, ExportedPolicy) else "scripted"
+    if lookahead:
+        policy_name += "+lookahead"
     report = {
         "track": base.name, "laps": base.laps, "seed": seed, "quad": quad.name,
         "detector": det_name, "policy": policy_name, "backend": backend,

@@ -115,3 +115,46 @@ def test_open_loop_flies_the_oracles_flight_and_records_the_estimate():
     )
     assert all(rec.target_ok[:5]) and rec.gate_dist[0] > rec.gate_dist[5]  # flying at the gate
     assert seen.report["perception"]["detection_rate"] is not None
+
+
+def test_lookahead_flies_the_race_and_says_so():
+    """race --lookahead: the report names the filter; with the oracle the filter's model flies the
+    true race, with a detector the race as vision knows it (odometry and the estimator's map)."""
+    for detector in ("oracle", "opencv"):
+        r = run_race("single-gate", detector=detector, seed=2, randomize=True, lookahead=True)
+        assert r.report["policy"] == "default+lookahead"
+        assert r.report["finished"], r.report
+    with pytest.raises(ValueError, match="scripted"):
+        run_race("single-gate", detector="oracle", policy="scripted", lookahead=True)
+
+
+def test_the_believed_race_puts_the_gates_where_vision_has_them():
+    from icarus_vision.estimator import OdometryReading
+    from icarus_vision.estimator.estimator import GateEstimator
+    from icarus_vision.racing.loop import believed_race, odometry_state
+    from icarus_vision.render.camera import Camera
+    from icarus_vision.sim.config import EnvConfig
+    from icarus_vision.sim.dynamics import QuadState
+    from icarus_vision.sim.track import Gate, Track
+    from icarus_vision.sim.vec_env import BatchedRacingVecEnv
+
+    prior = Track("two", (Gate((6.0, 0.0, 2.0)), Gate((14.0, 1.0, 2.0), yaw_deg=10.0)))
+    env = BatchedRacingVecEnv(1, EnvConfig(track=prior))
+    env.seed(0)
+    env.reset()
+    env.core.g_pos[0, :2] += 0.3  # the real gates are off the map
+    est = GateEstimator(Camera(), prior=prior)
+    od = OdometryReading(
+        0.0, np.array([0.0, 0.0, 2.0]), np.array([1.0, 0, 0]), np.array([0, 0, 0, 1.0]), np.zeros(3)
+    )
+    estimate = est.predict(od)
+    pos, yaw = est.passage_map()
+    np.testing.assert_allclose(pos, [[6.0, 0.0, 2.0], [14.0, 1.0, 2.0]])
+    np.testing.assert_allclose(yaw, [0.0, np.radians(10.0)], atol=1e-9)
+    belief = believed_race(env.core, est, estimate, od, prior)
+    np.testing.assert_allclose(belief.g_pos[0, 0], od.pos + estimate.rel_world)
+    np.testing.assert_allclose(belief.g_pos[0, 1], [14.0, 1.0, 2.0])
+    assert belief.g_cos[0, 1] == pytest.approx(np.cos(np.radians(10.0)))
+    np.testing.assert_allclose(env.core.g_pos[0, 1], [14.3, 1.3, 2.3])  # the race is untouched
+    state = odometry_state(od, QuadState.zeros(1))
+    np.testing.assert_array_equal(state.vel[0], [1.0, 0, 0])
