@@ -1,7 +1,8 @@
 """How close to the time-optimal lap a policy flies, and how often it finishes, on race layouts.
 
     .venv/bin/python benchmarks/policy_speed.py [--policy default] [--tracks 20] [--seed0 2000]
-        [--gates 10] [--difficulty 1.0] [--finish-episodes 300] [--plan-only] [--json PATH]
+        [--gates 10] [--difficulty 1.0] [--finish-episodes 300] [--plan-only] [--lookahead]
+        [--json PATH]
 
 Lap ratio: draws ``race_track(gates, seed, difficulty)`` for seeds from ``--seed0`` until
 ``--tracks`` of them have a time-optimal plan (plans are solved once and cached under
@@ -14,6 +15,8 @@ speed ratio). ``--plan-only`` fills the cache and stops.
 
 Finish rate: the policy on ``--finish-episodes`` random race layouts of the same distribution
 (seed 5000 on), ground truth, randomisation on (mass ±20 %, thrust ±10 %, wind, gusts, gate jitter).
+
+``--lookahead`` flies both through the look-ahead safety filter (``eval-policy --lookahead``).
 """
 
 from __future__ import annotations
@@ -66,6 +69,7 @@ def main() -> None:
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--finish-episodes", type=int, default=300)
     ap.add_argument("--plan-only", action="store_true")
+    ap.add_argument("--lookahead", action="store_true", help="through the look-ahead filter")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
 
@@ -75,7 +79,9 @@ def main() -> None:
     pol = resolve_policy(args.policy)
     rows = []
     for seed, track, best, plan_path in planned:
-        r = evaluate_policy(pol, track, episodes=1, randomize=False, seed=0)
+        r = evaluate_policy(
+            pol, track, episodes=1, randomize=False, seed=0, lookahead=args.lookahead
+        )
         lap, speed = r["lap_time_s"]["median"], r["mean_speed_mps"]
         rows.append({"seed": seed, "time_optimal_s": round(best, 4), "finished": r["success_rate"] == 1.0,
                      "lap_s": lap, "ratio": None if lap is None else round(lap / best, 4),
@@ -84,9 +90,11 @@ def main() -> None:
         print(rows[-1], flush=True)
     ratios = [r["ratio"] for r in rows if r["ratio"] is not None]
     finish = evaluate_policy(pol, None, episodes=args.finish_episodes, num_gates=args.gates,
-                             randomize=True, seed=5000, difficulty=args.difficulty)  # fmt: skip
+                             randomize=True, seed=5000, difficulty=args.difficulty,
+                             lookahead=args.lookahead)  # fmt: skip
     summary = {
         "policy": pol.name,
+        "lookahead": args.lookahead,
         "difficulty": args.difficulty,
         "planned_tracks": len(planned),
         "plan_failures": failed,
