@@ -60,19 +60,23 @@ def test_a_clear_flight_is_flown_unchanged():
     assert filt.interventions == 0
 
 
+def airborne(height: float) -> tuple[BatchedRacingVecEnv, np.ndarray]:
+    """One drone on grand-prix, taken off and level at ``height``; its observation."""
+    env = BatchedRacingVecEnv(1, EnvConfig(track="grand-prix"))
+    env.seed(0)
+    env.reset()
+    env.state.pos[0, 2] = height
+    env.core.taken_off[:] = True
+    return env, env.core.observe(env.state)
+
+
 def test_a_predicted_crash_is_averted():
     """Falling from 1.2 m with the motors idle hits the ground within the horizon; the filter
-    flies the candidate that crashes latest, full thrust."""
-    cfg = EnvConfig(track="grand-prix")
-    env = BatchedRacingVecEnv(1, cfg)
-    env.seed(0)
-    obs = env.reset()
-    env.state.pos[0, 2] = 1.2
-    env.core.taken_off[:] = True
-    obs = env.core.observe(env.state)
-    filt = Lookahead(ConstantPilot([-1, 0, 0, 0]), cfg)
+    flies the candidate that crashes latest: a large thrust offset."""
+    env, obs = airborne(1.2)
+    filt = Lookahead(ConstantPilot([-1, 0, 0, 0]), env.config)
     action = filt.act(env.core, env.state, obs)
-    assert action[0, 0] == pytest.approx(0.0)  # -1 + the largest thrust offset
+    assert action[0, 0] >= 0.0  # -1 plus an offset of 1 or more
     np.testing.assert_array_equal(action[0, 1:], 0.0)
     assert filt.interventions == 1
     # a drone not racing any more is left alone
@@ -83,15 +87,10 @@ def test_a_predicted_crash_is_averted():
 def test_the_disturbance_the_model_misses_is_estimated():
     """Wind the model does not know pushes a level drone by drag · wind / mass."""
     quad = QuadParams()
-    cfg = EnvConfig(track="grand-prix")
-    env = BatchedRacingVecEnv(1, cfg)
-    env.seed(0)
-    obs = env.reset()
-    env.state.pos[0, 2] = 3.0
-    env.core.taken_off[:] = True
+    env, obs = airborne(3.0)
     wind = np.array([2.0, -1.0, 0.0])
     env.core.wind_const[0] = wind
-    filt = Lookahead(ConstantPilot([hover_thrust(quad), 0, 0, 0]), cfg,
+    filt = Lookahead(ConstantPilot([hover_thrust(quad), 0, 0, 0]), env.config,
                      LookaheadConfig(horizon_s=0.04, offset_s=0.02, disturbance_gain=0.3))  # fmt: skip
     for _ in range(30):
         obs, *_ = env.step(filt.act(env.core, env.state, obs))
