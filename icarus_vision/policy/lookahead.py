@@ -43,6 +43,9 @@ class LookaheadConfig:
     """Offsets tried on each action axis, both signs (action units; actions stay in [-1, 1])."""
     disturbance_gain: float = 0.2
     """Low-pass gain per control step of the disturbance estimate (0: none estimated)."""
+    margin_m: float = 0.0
+    """Added to the drone's radius in the model: a flight that passes closer than this to a gate's
+    frame or the ground counts as a crash (room for the error of gates known from vision)."""
 
     def __post_init__(self) -> None:
         if not self.horizon_s > 0:
@@ -53,6 +56,8 @@ class LookaheadConfig:
             raise ValueError(f"lookahead amplitudes must be in (0, 2], got {self.amplitudes}")
         if not 0 <= self.disturbance_gain <= 1:
             raise ValueError(f"disturbance_gain must be in [0, 1], got {self.disturbance_gain}")
+        if not 0 <= self.margin_m < 1:
+            raise ValueError(f"lookahead margin_m must be in [0, 1), got {self.margin_m}")
 
 
 def candidate_offsets(amplitudes: tuple[float, ...]) -> np.ndarray:
@@ -140,6 +145,7 @@ class Lookahead:
         model = self._models.get(m)
         if model is None:
             model = self._models[m] = RaceCore(replace(self.cfg, track=src.cfg.track), m)
+            model.params.radius = model.params.radius + self.config.margin_m
         n = src.n
         for name, val in vars(src).items():
             if isinstance(val, np.ndarray) and val.ndim >= 1 and val.shape[0] == n:

@@ -15,7 +15,7 @@ import numpy as np
 from icarus_vision.estimator.config import config_for_detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.policy.export import ExportedPolicy
-from icarus_vision.policy.lookahead import Lookahead
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.racing.loop import LoopRecord, fly_loop
@@ -31,6 +31,9 @@ from icarus_vision.sim.track import Track
 
 DETECTORS = ("cnn", "opencv", "oracle")
 PLAN_CACHE = "runs/plans"
+VISION_MARGIN_M = 0.1
+"""race --lookahead with a detector: the filter's model counts a flight within this of a gate's
+frame as a crash (the race loop's gates are where vision puts them, a few centimetres off)."""
 
 
 def time_optimal(track: Track, quad: QuadParams, cache_dir: str = PLAN_CACHE) -> float | None:
@@ -71,6 +74,13 @@ class RaceResult:
     video: list
     ghost: tuple[np.ndarray, np.ndarray] | None = None
     loop: LoopRecord | None = None
+
+
+def _lookahead(policy: ExportedPolicy, cfg: EnvConfig, detector: str) -> Lookahead:
+    """The look-ahead filter of a race: with the camera in the loop its model keeps
+    ``VISION_MARGIN_M`` from the gates, which it knows only as well as vision has measured them."""
+    margin = 0.0 if detector == "oracle" else VISION_MARGIN_M
+    return Lookahead(policy, cfg, LookaheadConfig(margin_m=margin))
 
 
 def _pilot(policy: ExportedPolicy | str, quad: QuadParams):
@@ -176,7 +186,7 @@ def run_race(
         rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector_obj or detector, camera=camera,
                        scene=scene, seed=seed, prior=base, latency_frames=latency_frames, on_frame=on_frame,
                        estimator=config_for_detector(det_name), look=look, open_loop=open_loop,
-                       lookahead=Lookahead(pilot_spec, cfg) if lookahead else None)  # fmt: skip
+                       lookahead=_lookahead(pilot_spec, cfg, det_name) if lookahead else None)  # fmt: skip
     finally:
         env.close()
         if scene is not None:
