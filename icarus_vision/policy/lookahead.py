@@ -28,8 +28,6 @@ from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.env import integrate_batched
 from icarus_vision.sim.race_core import RaceCore
 
-_PER_DRONE_SKIP = ("rngs", "tracks", "layouts", "lap_times", "replay", "crashes", "snaps")
-
 
 @dataclass(frozen=True)
 class LookaheadConfig:
