@@ -26,7 +26,9 @@ def test_reference_layout(reference):
     for f in ("manifest.json", "config.json", "contact_sheet.png", "annotations/train.json"):
         assert f in names
     assert not [n for n in names if n.endswith(".tmp")]
-    assert len(result.worker_peak_rss_mb) == 2 and all(m > 10 for m in result.worker_peak_rss_mb)
+    # one entry per worker that rendered a shard: on a busy machine one of the two may take all four
+    peaks = result.worker_peak_rss_mb
+    assert 1 <= len(peaks) <= 2 and all(m > 10 for m in peaks)
 
 
 def test_same_recipe_and_seed_give_byte_identical_files(reference, tiny_recipe, tmp_path):
