@@ -97,11 +97,8 @@ class Lookahead:
         self._models: dict[int, RaceCore] = {}
         self._accel: np.ndarray | None = None  # (N, 3) disturbance estimate, m/s²
         self._pred_vel: np.ndarray | None = None  # (N, 3) velocity the model predicted
-        self._t: np.ndarray | None = None  # race clock at the last act
-
-    def reset(self) -> None:
-        """Forget the disturbance estimate (a new race)."""
-        self._accel = self._pred_vel = self._t = None
+        self._t: np.ndarray | None = None  # race clock at the last act (a drone reset since
+        # then starts its disturbance estimate afresh)
 
     def act(
         self,
