@@ -1,7 +1,8 @@
 """Where a policy fails on race layouts: the gate it was flying to, by the gate's shape and place.
 
     .venv/bin/python benchmarks/policy_failures.py [--policy default] [--episodes 300]
-        [--seed 5000] [--gates 10] [--difficulty 1.0] [--no-randomize] [--lookahead] [--json PATH]
+        [--seed 5000] [--gates 10] [--difficulty 1.0] [--no-randomize] [--lookahead]
+        [--lookahead-race] [--json PATH]
 
 Flies ``--episodes`` random race layouts (ground truth, randomisation on: the finish-rate setting of
 ``policy_speed.py``) and, for every gate the policy flew to, records whether it got through. Prints
@@ -22,7 +23,7 @@ from collections import defaultdict
 import numpy as np
 
 from icarus_vision.fileio import atomic_write_json
-from icarus_vision.policy.lookahead import Lookahead
+from icarus_vision.policy.lookahead import Lookahead, racing
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.rules import crossing_alignment
@@ -86,6 +87,10 @@ def main() -> None:
     ap.add_argument(
         "--lookahead", action="store_true",
         help="fly the policy through the look-ahead safety filter (policy/lookahead.py)",
+    )
+    ap.add_argument(
+        "--lookahead-race", action="store_true",
+        help="the filter in its racing mode (eval-policy --lookahead-race)",
     )  # fmt: skip
     ap.add_argument(
         "--no-randomize", action="store_true",
@@ -101,7 +106,8 @@ def main() -> None:
     env = BatchedRacingVecEnv(a.episodes, cfg)
     env.seed(a.seed)
     obs = env.reset()
-    pilot = Lookahead(policy, cfg) if a.lookahead else None
+    a.lookahead = a.lookahead or a.lookahead_race
+    pilot = Lookahead(policy, cfg, racing() if a.lookahead_race else None) if a.lookahead else None
     tracks = list(env.core.tracks)
     results: list[dict | None] = [None] * a.episodes
     crossings: list[list[float]] = [[] for _ in range(a.episodes)]  # angle at each gate passed
@@ -158,13 +164,15 @@ def main() -> None:
                 cross_hit.append(r["last_angle"])
     n_ok = sum(r["success"] for r in results)
     filtered = " with the look-ahead filter" if a.lookahead else ""
+    filtered += " (racing mode)" if a.lookahead_race else ""
     print(
         f"policy {a.policy}{filtered}: {n_ok}/{a.episodes} finished ({100 * n_ok / a.episodes:.1f} %)"
     )
     print("failed episodes by ending:", dict(reasons))
     print("gate collisions by the gate hit:", dict(hit))
     report = {
-        "finished": n_ok, "episodes": a.episodes, "lookahead": a.lookahead, "endings": dict(reasons),
+        "finished": n_ok, "episodes": a.episodes, "lookahead": a.lookahead,
+        "lookahead_race": a.lookahead_race, "endings": dict(reasons),
         "gate_hit": dict(hit), "per_gate": {},
     }  # fmt: skip
     for name in BUCKETS:

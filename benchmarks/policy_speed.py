@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/policy_speed.py [--policy default] [--tracks 20] [--seed0 2000]
         [--gates 10] [--difficulty 1.0] [--finish-episodes 300] [--plan-only] [--lookahead]
+        [--lookahead-race]
         [--json PATH]
 
 Lap ratio: draws ``race_track(gates, seed, difficulty)`` for seeds from ``--seed0`` until
@@ -16,7 +17,8 @@ speed ratio). ``--plan-only`` fills the cache and stops.
 Finish rate: the policy on ``--finish-episodes`` random race layouts of the same distribution
 (seed 5000 on), ground truth, randomisation on (mass ±20 %, thrust ±10 %, wind, gusts, gate jitter).
 
-``--lookahead`` flies both through the look-ahead safety filter (``eval-policy --lookahead``).
+``--lookahead`` flies both through the look-ahead safety filter (``eval-policy --lookahead``),
+``--lookahead-race`` through the filter's racing mode (``eval-policy --lookahead-race``).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import numpy as np
 from icarus_vision.planning.planner import plan
 from icarus_vision.planning.result import PlanError
 from icarus_vision.policy.evaluate import evaluate_policy
+from icarus_vision.policy.lookahead import racing
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim.race_layouts import race_track
 
@@ -70,6 +73,7 @@ def main() -> None:
     ap.add_argument("--finish-episodes", type=int, default=300)
     ap.add_argument("--plan-only", action="store_true")
     ap.add_argument("--lookahead", action="store_true", help="through the look-ahead filter")
+    ap.add_argument("--lookahead-race", action="store_true", help="the filter's racing mode")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
 
@@ -77,10 +81,11 @@ def main() -> None:
     if args.plan_only:
         return
     pol = resolve_policy(args.policy)
+    filt = racing() if args.lookahead_race else args.lookahead
     rows = []
     for seed, track, best, plan_path in planned:
         r = evaluate_policy(
-            pol, track, episodes=1, randomize=False, seed=0, lookahead=args.lookahead
+            pol, track, episodes=1, randomize=False, seed=0, lookahead=filt
         )
         lap, speed = r["lap_time_s"]["median"], r["mean_speed_mps"]
         rows.append({"seed": seed, "time_optimal_s": round(best, 4), "finished": r["success_rate"] == 1.0,
@@ -91,10 +96,11 @@ def main() -> None:
     ratios = [r["ratio"] for r in rows if r["ratio"] is not None]
     finish = evaluate_policy(pol, None, episodes=args.finish_episodes, num_gates=args.gates,
                              randomize=True, seed=5000, difficulty=args.difficulty,
-                             lookahead=args.lookahead)  # fmt: skip
+                             lookahead=filt)  # fmt: skip
     summary = {
         "policy": pol.name,
-        "lookahead": args.lookahead,
+        "lookahead": bool(filt),
+        "lookahead_race": args.lookahead_race,
         "difficulty": args.difficulty,
         "planned_tracks": len(planned),
         "plan_failures": failed,

@@ -6,7 +6,8 @@
         [--policy auto] [--json PATH]
     .venv/bin/python benchmarks/race_policy.py vision [--tracks 140] [--difficulty 1.0]
         [--policy default] [--json PATH]
-    (each with ``--lookahead``: through the look-ahead safety filter, as ``race --lookahead``)
+    (each with ``--lookahead``: through the look-ahead safety filter, as ``race --lookahead``;
+    ``--lookahead-race``: its racing mode, as ``race --lookahead-race``)
 
 ``builtin``: every built-in track, `race --randomize --detector cnn --policy default` (the
 generalist; ``--policy auto`` flies the shipped specialists where there are some) on
@@ -59,7 +60,7 @@ def _summary(reports: list[dict]) -> dict:
 
 def builtin(
     seeds: int, detector: str, policy: str = "default", backend: str = "pybullet",
-    recipe: str | None = "gates-v1", lookahead: bool = False,
+    recipe: str | None = "gates-v1", lookahead: bool | str = False,
 ) -> dict:  # fmt: skip
     out = {}
     for name in BUILTIN_TRACKS:
@@ -77,7 +78,7 @@ def specialists(
     recipe: str | None = "gates-v1",
     policy: str = "auto",
     tracks: tuple[str, ...] = ("grand-prix", "split-s"),
-    lookahead: bool = False,
+    lookahead: bool | str = False,
 ) -> dict:
     out = {}
     for name in tracks:
@@ -92,7 +93,7 @@ def specialists(
 
 def vision_race(
     i: int, detector: str, policy: str, difficulty: float = 1.0,
-    recipe: str | None = "gates-v1", open_loop: bool = False, lookahead: bool = False,
+    recipe: str | None = "gates-v1", open_loop: bool = False, lookahead: bool | str = False,
 ) -> RaceResult:  # fmt: skip
     """The race loop's ``i``-th race: layout ``race_track(10, 3000 + i)``, seed 100 + i,
     randomised (also flown open loop by ``estimator_races.py``)."""
@@ -106,7 +107,7 @@ def vision(
     difficulty: float,
     policy: str = "default",
     recipe: str | None = "gates-v1",
-    lookahead: bool = False,
+    lookahead: bool | str = False,
 ) -> dict:
     out = {}
     for det in ("oracle", "cnn"):
@@ -135,21 +136,24 @@ def main() -> None:
                     help="the look race --randomize draws (gates-v1, gates-v3, a path, or none)")  # fmt: skip
     ap.add_argument("--lookahead", action="store_true",
                     help="fly through the look-ahead safety filter (race --lookahead)")  # fmt: skip
+    ap.add_argument("--lookahead-race", action="store_true",
+                    help="the filter's racing mode (race --lookahead-race)")  # fmt: skip
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     policy = args.policy or ("auto" if args.what == "specialists" else "default")
     recipe = None if args.recipe == "none" else args.recipe
+    filt = "race" if args.lookahead_race else args.lookahead
     t0 = time.perf_counter()
     if args.what == "builtin":
-        out = builtin(args.seeds, args.detector, policy, args.backend, recipe, args.lookahead)
+        out = builtin(args.seeds, args.detector, policy, args.backend, recipe, filt)
         out["backend"], out["policy_asked"] = args.backend, policy
     elif args.what == "specialists":
         tracks = tuple(args.track or ("grand-prix", "split-s"))
-        out = specialists(args.seeds, recipe, policy, tracks, args.lookahead)
+        out = specialists(args.seeds, recipe, policy, tracks, filt)
         out["policy_asked"] = policy
     else:
-        out = vision(args.tracks, args.difficulty, policy, recipe, args.lookahead)
-    out["lookahead"] = args.lookahead
+        out = vision(args.tracks, args.difficulty, policy, recipe, filt)
+    out["lookahead"], out["lookahead_race"] = bool(filt), args.lookahead_race
     out["wall_s"], out["recipe"] = round(time.perf_counter() - t0, 1), recipe
     print(json.dumps(out, indent=1))
     if args.json:

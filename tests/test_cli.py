@@ -237,3 +237,7 @@ def test_eval_policy_and_race_take_the_lookahead_filter(tmp_path, monkeypatch):
                               "--no-video", "--json", "r.json", "--out", "r"])  # fmt: skip
     assert res.exit_code == 0, res.output
     assert json.loads((tmp_path / "r.json").read_text())["policy"] == "default+lookahead"
+    res = runner.invoke(app, ["eval-policy", "--episodes", "2", "--gates", "2", "--lookahead-race",
+                              "--json", "e.json"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "e.json").read_text())["lookahead_race"] is True

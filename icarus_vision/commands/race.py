@@ -55,6 +55,14 @@ def race_cmd(
         "the policy's own flight would crash the clearest of 40 corrected actions is flown instead "
         "(the report's policy reads NAME+lookahead).",
     ),
+    lookahead_race: bool = typer.Option(
+        False,
+        "--lookahead-race",
+        help="The look-ahead filter in its racing mode (implies --lookahead): also where the "
+        "policy's flight is clear, pitch offsets of ±0.25 and ±0.5 held 0.2 s are predicted and "
+        "the one that gets furthest is flown when it keeps 0.3 m more from the gates (the "
+        "report's policy reads NAME+lookahead-race).",
+    ),
     video: Path = typer.Option(None, help="Video path (default: OUT/race.mp4)."),
     no_video: bool = typer.Option(False, "--no-video", help="Skip the video (faster)."),
     json_path: Path = typer.Option(None, "--json", help="Also write the report to this JSON file."),
@@ -78,7 +86,7 @@ def race_cmd(
     want_video = not no_video
     result = run_race(track, quad=quad_params, laps=laps, seed=seed, detector=detector, policy=policy,
                       backend=backend, randomize=randomize, latency_frames=latency, video=want_video,
-                      recipe=recipe, lookahead=lookahead)  # fmt: skip
+                      recipe=recipe, lookahead="race" if lookahead_race else lookahead)  # fmt: skip
     out = out or Path("runs") / f"race-{datetime.now():%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
     r = result.report

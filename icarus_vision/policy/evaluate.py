@@ -76,7 +76,8 @@ def evaluate_policy(
             [0, 1] ``race_track`` layouts of that difficulty.
         quad: the quadrotor (None: the built-in racer-500g).
         lookahead: fly the policy through the look-ahead safety filter (``policy.lookahead``;
-            True: its default settings). Exported policies only.
+            True: its default settings, or a ``LookaheadConfig``, e.g. ``racing()``). Exported
+            policies only.
 
     Returns:
         The eval-policy JSON fields of ARCHITECTURE.md plus crash reasons and mean speed.
@@ -104,7 +105,8 @@ def evaluate_policy(
     if base is None and difficulty is not None:
         track_name = f"race-{num_gates}-d{difficulty:g}"
     return {"policy": name, "track": track_name, "backend": backend, "randomize": randomize,
-            "seed": seed, "lookahead": la is not None, **_summary(results)}  # fmt: skip
+            "seed": seed, "lookahead": la is not None,
+            "lookahead_race": la is not None and bool(la.race_amplitudes), **_summary(results)}  # fmt: skip
 
 
 def time_optimal_fields(

@@ -15,7 +15,7 @@ import numpy as np
 from icarus_vision.estimator.config import config_for_detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.policy.export import ExportedPolicy
-from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, racing
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.racing.loop import LoopRecord, fly_loop
@@ -76,11 +76,13 @@ class RaceResult:
     loop: LoopRecord | None = None
 
 
-def _lookahead(policy: ExportedPolicy, cfg: EnvConfig, detector: str) -> Lookahead:
-    """The look-ahead filter of a race: with the camera in the loop its model keeps
-    ``VISION_MARGIN_M`` from the gates, which it knows only as well as vision has measured them."""
+def _lookahead(policy: ExportedPolicy, cfg: EnvConfig, detector: str, mode: bool | str) -> Lookahead:
+    """The look-ahead filter of a race (``mode`` True or "race": its racing mode): with the
+    camera in the loop its model keeps ``VISION_MARGIN_M`` from the gates, which it knows only as
+    well as vision has measured them."""
     margin = 0.0 if detector == "oracle" else VISION_MARGIN_M
-    return Lookahead(policy, cfg, LookaheadConfig(margin_m=margin))
+    config = racing(margin) if mode == "race" else LookaheadConfig(margin_m=margin)
+    return Lookahead(policy, cfg, config)
 
 
 def _pilot(policy: ExportedPolicy | str, quad: QuadParams):
@@ -104,7 +106,7 @@ def run_race(
     video: bool = False,
     recipe: str | None = "gates-v1",
     open_loop: bool = False,
-    lookahead: bool = False,
+    lookahead: bool | str = False,
 ) -> RaceResult:
     """Fly ``track`` once with camera, detector, estimator and pilot in the loop.
 
@@ -125,7 +127,8 @@ def run_race(
         open_loop: the pilot flies on the truth while camera, detector and estimator run and are
             recorded (``RaceResult.loop``): perception measured on the oracle's flight.
         lookahead: fly the policy through the look-ahead safety filter (``policy.lookahead``);
-            the report's ``policy`` then reads ``NAME+lookahead``.
+            the report's ``policy`` then reads ``NAME+lookahead``. "race": the filter's racing
+            mode (``NAME+lookahead-race``).
     """
     check_backend(backend)
     if latency_frames < 0:
@@ -143,7 +146,9 @@ def run_race(
     pilot_spec = resolve_policy(policy, track=base)
     if isinstance(pilot_spec, ExportedPolicy):
         pilot_spec.check_quad(quad)
-    elif lookahead:
+    if lookahead not in (False, True, "race"):
+        raise ValueError(f"lookahead must be True, False or 'race', got {lookahead!r}")
+    if lookahead and not isinstance(pilot_spec, ExportedPolicy):
         raise ValueError("--lookahead filters an exported policy, not the scripted controller")
     ghost = planned_ghost(base, quad)
     obs_mode = pilot_spec.observation if isinstance(pilot_spec, ExportedPolicy) else "basic"
@@ -186,7 +191,7 @@ def run_race(
         rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector_obj or detector, camera=camera,
                        scene=scene, seed=seed, prior=base, latency_frames=latency_frames, on_frame=on_frame,
                        estimator=config_for_detector(det_name), look=look, open_loop=open_loop,
-                       lookahead=_lookahead(pilot_spec, cfg, det_name) if lookahead else None)  # fmt: skip
+                       lookahead=_lookahead(pilot_spec, cfg, det_name, lookahead) if lookahead else None)  # fmt: skip
     finally:
         env.close()
         if scene is not None:
@@ -207,7 +212,7 @@ def run_race(
     }
     policy_name = pilot_spec.name if isinstance(pilot_spec, ExportedPolicy) else "scripted"
     if lookahead:
-        policy_name += "+lookahead"
+        policy_name += "+lookahead-race" if lookahead == "race" else "+lookahead"
     report = {
         "track": base.name, "laps": base.laps, "seed": seed, "quad": quad.name,
         "detector": det_name, "policy": policy_name, "backend": backend,

@@ -1,5 +1,6 @@
 """The look-ahead safety filter: leaves a clear flight alone, averts a predicted crash, learns the
-disturbance its model misses, and flies evaluations."""
+disturbance its model misses, and flies evaluations; its racing mode flies a faster candidate only
+where that stays clear by its margin."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import numpy as np
 import pytest
 
 from icarus_vision.policy.evaluate import evaluate_policy
-from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, candidate_offsets
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, candidate_offsets, racing
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim import dynamics
 from icarus_vision.sim.config import EnvConfig
@@ -29,6 +30,11 @@ def hover_thrust(quad: QuadParams) -> float:
     return 2 * quad.mass * GRAVITY / quad.thrust_max - 1
 
 
+def test_candidates_on_some_axes():
+    offs = candidate_offsets((0.5,), axes=(2,))
+    np.testing.assert_array_equal(offs, [[0, 0, 0, 0], [0, 0, 0.5, 0], [0, 0, -0.5, 0]])
+
+
 def test_candidates_start_with_the_policy_alone():
     offs = candidate_offsets((0.25, 1.0))
     assert offs.shape == (17, 4)
@@ -40,7 +46,8 @@ def test_candidates_start_with_the_policy_alone():
 @pytest.mark.parametrize(
     "kwargs",
     [{"horizon_s": 0}, {"offset_s": 1.0}, {"amplitudes": ()}, {"amplitudes": (3.0,)},
-     {"disturbance_gain": 1.5}, {"margin_m": -0.1}],
+     {"disturbance_gain": 1.5}, {"margin_m": -0.1}, {"race_amplitudes": (0.0,)},
+     {"race_amplitudes": (0.5,), "race_axes": (4,)}, {"race_amplitudes": (0.5,), "race_axes": ()}],
 )  # fmt: skip
 def test_bad_settings_are_refused(kwargs):
     with pytest.raises(ValueError):
@@ -134,3 +141,42 @@ def test_evaluate_policy_flies_through_the_filter():
     assert plain["lookahead"] is False
     with pytest.raises(ValueError, match="scripted"):
         evaluate_policy("scripted", episodes=1, num_gates=2, lookahead=True)
+
+
+def test_racing_mode_flies_a_candidate_that_gets_further():
+    """A drone hovering 3 m up on grand-prix, its pilot holding hover: the racing mode tips it
+    toward the first gate with a pitch offset, and it gets nearer the gate than hovering does."""
+    quad = QuadParams()
+    hover = ConstantPilot([hover_thrust(quad), 0, 0, 0])
+    dist = {}
+    for name, config in (("plain", LookaheadConfig()), ("racing", racing())):
+        env, obs = airborne(3.0)
+        env.state.thrust[:] = quad.mass * GRAVITY
+        filt = Lookahead(hover, env.config, config)
+        for step in range(20):
+            action = filt.act(env.core, env.state, obs)
+            if step == 0 and name == "racing":
+                assert action[0, 2] != hover.action[2] and filt.interventions == 1
+                np.testing.assert_array_equal(action[0, [0, 1, 3]], hover.action[[0, 1, 3]])
+            obs, *_ = env.step(action)
+        dist[name] = float(np.linalg.norm(env.core.g_pos[0, 0] - env.state.pos[0]))
+    assert dist["racing"] < dist["plain"] - 0.05
+
+
+def test_racing_mode_keeps_its_margin():
+    """1 m over the ground no tipped flight keeps 0.9 m more from it: the policy's own (clear)
+    action is flown."""
+    quad = QuadParams()
+    env, obs = airborne(1.0)
+    env.state.thrust[:] = quad.mass * GRAVITY
+    hover = ConstantPilot([hover_thrust(quad), 0, 0, 0])
+    filt = Lookahead(hover, env.config, LookaheadConfig(race_amplitudes=(0.5,), race_margin_m=0.9))
+    action = filt.act(env.core, env.state, obs)
+    np.testing.assert_array_equal(action[0], hover.action)
+    assert filt.interventions == 0
+
+
+def test_evaluate_policy_flies_the_racing_mode():
+    policy = resolve_policy("default")
+    r = evaluate_policy(policy, episodes=2, num_gates=3, difficulty=0.5, seed=1, lookahead=racing())
+    assert r["lookahead"] is True and r["lookahead_race"] is True
