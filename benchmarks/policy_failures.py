@@ -85,7 +85,8 @@ def main() -> None:
     ap.add_argument("--difficulty", type=float, default=1.0)
     ap.add_argument("--json", default=None)
     ap.add_argument(
-        "--lookahead", action="store_true",
+        "--lookahead",
+        action="store_true",
         help="fly the policy through the look-ahead safety filter (policy/lookahead.py)",
     )
     ap.add_argument(

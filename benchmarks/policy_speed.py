@@ -84,9 +84,7 @@ def main() -> None:
     filt = racing() if args.lookahead_race else args.lookahead
     rows = []
     for seed, track, best, plan_path in planned:
-        r = evaluate_policy(
-            pol, track, episodes=1, randomize=False, seed=0, lookahead=filt
-        )
+        r = evaluate_policy(pol, track, episodes=1, randomize=False, seed=0, lookahead=filt)
         lap, speed = r["lap_time_s"]["median"], r["mean_speed_mps"]
         rows.append({"seed": seed, "time_optimal_s": round(best, 4), "finished": r["success_rate"] == 1.0,
                      "lap_s": lap, "ratio": None if lap is None else round(lap / best, 4),

@@ -76,7 +76,9 @@ class LookaheadConfig:
         if not 0 <= self.margin_m < 1:
             raise ValueError(f"lookahead margin_m must be in [0, 1), got {self.margin_m}")
         if any(not 0 < a <= 2 for a in self.race_amplitudes):
-            raise ValueError(f"lookahead race_amplitudes must be in (0, 2], got {self.race_amplitudes}")
+            raise ValueError(
+                f"lookahead race_amplitudes must be in (0, 2], got {self.race_amplitudes}"
+            )
         if not self.race_axes or any(a not in (0, 1, 2, 3) for a in self.race_axes):
             raise ValueError(f"lookahead race_axes must be action axes 0–3, got {self.race_axes}")
 

@@ -76,7 +76,9 @@ class RaceResult:
     loop: LoopRecord | None = None
 
 
-def _lookahead(policy: ExportedPolicy, cfg: EnvConfig, detector: str, mode: bool | str) -> Lookahead:
+def _lookahead(
+    policy: ExportedPolicy, cfg: EnvConfig, detector: str, mode: bool | str
+) -> Lookahead:
     """The look-ahead filter of a race (``mode`` True or "race": its racing mode): with the
     camera in the loop its model keeps ``VISION_MARGIN_M`` from the gates, which it knows only as
     well as vision has measured them."""
