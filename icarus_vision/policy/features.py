@@ -57,9 +57,16 @@ def _check_version(version: str) -> None:
         )
 
 
-def _yaw_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Rotate world vectors (N, 3) by −yaw about z."""
-    return np.stack((c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]), axis=1)
+def _yaw_frame(
+    v: np.ndarray, c: np.ndarray, s: np.ndarray, out: np.ndarray | None = None
+) -> np.ndarray:
+    """Rotate world vectors (N, 3) by −yaw about z (into ``out`` (N, 3) when given)."""
+    out = np.empty((len(v), 3)) if out is None else out
+    x, y = v[:, 0], v[:, 1]
+    out[:, 0] = c * x + s * y
+    out[:, 1] = -s * x + c * y
+    out[:, 2] = v[:, 2]
+    return out
 
 
 def obs_to_features(obs: np.ndarray, version: str = FEATURES_V1) -> np.ndarray:
@@ -80,30 +87,30 @@ def obs_to_features(obs: np.ndarray, version: str = FEATURES_V1) -> np.ndarray:
     obs = np.asarray(obs, dtype=np.float64)
     if obs.ndim != 2:
         raise ValueError(f"obs must be (N, 15), (N, 21) or (N, 25), got shape {obs.shape}")
-    feature_dim(obs.shape[1], version)
+    out = np.empty((len(obs), feature_dim(obs.shape[1], version)))  # filled column by column
     yaw = obs[:, 8]
     c, s = np.cos(yaw), np.sin(yaw)
+    out[:, 0] = obs[:, 2] / POS_SCALE
+    out[:, 1:4] = _yaw_frame(obs[:, 3:6], c, s) / VEL_SCALE
+    out[:, 4:6] = obs[:, 6:8]
+    out[:, 6:9] = obs[:, 9:12] / RATE_SCALE
     gate = _yaw_frame(obs[:, 12:15], c, s)
     dist = np.linalg.norm(gate, axis=1, keepdims=True)
-    parts = [
-        obs[:, 2:3] / POS_SCALE,
-        _yaw_frame(obs[:, 3:6], c, s) / VEL_SCALE,
-        obs[:, 6:8],
-        obs[:, 9:12] / RATE_SCALE,
-        gate / POS_SCALE,
-        dist / POS_SCALE,
-        gate / np.maximum(dist, 1e-3),
-    ]
+    out[:, 9:12] = gate / POS_SCALE
+    out[:, 12:13] = dist / POS_SCALE
+    out[:, 13:16] = gate / np.maximum(dist, 1e-3)
+    k = 16
     if obs.shape[1] >= EXTENDED_DIM:
-        parts += [
-            _yaw_frame(obs[:, 15:18], c, s)[:, :2],
-            _yaw_frame(obs[:, 18:21], c, s) / POS_SCALE,
-        ]
+        out[:, 16:18] = _yaw_frame(obs[:, 15:18], c, s)[:, :2]
+        out[:, 18:21] = _yaw_frame(obs[:, 18:21], c, s) / POS_SCALE
+        k = 21
     if obs.shape[1] == RACING_DIM:
-        parts += [obs[:, 21:22] - SIZE_REF, _yaw_frame(obs[:, 22:25], c, s)[:, :2]]
+        out[:, 21] = obs[:, 21] - SIZE_REF
+        out[:, 22:24] = _yaw_frame(obs[:, 22:25], c, s)[:, :2]
+        k = 24
     if version == FEATURES_V2 and obs.shape[1] >= EXTENDED_DIM:
-        parts.append(gate_frame_features(obs))
-    return np.clip(np.concatenate(parts, axis=1), -CLIP, CLIP).astype(np.float32)
+        out[:, k:] = gate_frame_features(obs)
+    return np.clip(out, -CLIP, CLIP, out=out).astype(np.float32)
 
 
 def gate_frame_features(obs: np.ndarray) -> np.ndarray:
