@@ -28,6 +28,7 @@ import statistics
 import time
 
 from icarus_vision.fileio import atomic_write_json
+from icarus_vision.policy.lookahead import LookaheadConfig, racing
 from icarus_vision.racing.runner import RaceResult, run_race
 from icarus_vision.sim.builtin import BUILTIN_TRACKS
 from icarus_vision.sim.race_layouts import race_track
@@ -60,7 +61,7 @@ def _summary(reports: list[dict]) -> dict:
 
 def builtin(
     seeds: int, detector: str, policy: str = "default", backend: str = "pybullet",
-    recipe: str | None = "gates-v1", lookahead: bool | str = False,
+    recipe: str | None = "gates-v1", lookahead: bool | LookaheadConfig = False,
 ) -> dict:  # fmt: skip
     out = {}
     for name in BUILTIN_TRACKS:
@@ -78,7 +79,7 @@ def specialists(
     recipe: str | None = "gates-v1",
     policy: str = "auto",
     tracks: tuple[str, ...] = ("grand-prix", "split-s"),
-    lookahead: bool | str = False,
+    lookahead: bool | LookaheadConfig = False,
 ) -> dict:
     out = {}
     for name in tracks:
@@ -93,7 +94,7 @@ def specialists(
 
 def vision_race(
     i: int, detector: str, policy: str, difficulty: float = 1.0,
-    recipe: str | None = "gates-v1", open_loop: bool = False, lookahead: bool | str = False,
+    recipe: str | None = "gates-v1", open_loop: bool = False, lookahead: bool | LookaheadConfig = False,
 ) -> RaceResult:  # fmt: skip
     """The race loop's ``i``-th race: layout ``race_track(10, 3000 + i)``, seed 100 + i,
     randomised (also flown open loop by ``estimator_races.py``)."""
@@ -107,7 +108,7 @@ def vision(
     difficulty: float,
     policy: str = "default",
     recipe: str | None = "gates-v1",
-    lookahead: bool | str = False,
+    lookahead: bool | LookaheadConfig = False,
 ) -> dict:
     out = {}
     for det in ("oracle", "cnn"):
@@ -142,7 +143,7 @@ def main() -> None:
     args = ap.parse_args()
     policy = args.policy or ("auto" if args.what == "specialists" else "default")
     recipe = None if args.recipe == "none" else args.recipe
-    filt = "race" if args.lookahead_race else args.lookahead
+    filt = racing() if args.lookahead_race else args.lookahead
     t0 = time.perf_counter()
     if args.what == "builtin":
         out = builtin(args.seeds, args.detector, policy, args.backend, recipe, filt)

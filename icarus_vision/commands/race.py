@@ -74,6 +74,7 @@ def race_cmd(
     view, real time) and prints a summary.
     """
     from icarus_vision.fileio import atomic_write_json, check_output
+    from icarus_vision.policy.lookahead import racing
     from icarus_vision.racing.plots import plot_trajectory
     from icarus_vision.racing.runner import run_race
     from icarus_vision.racing.video import write_video
@@ -86,7 +87,7 @@ def race_cmd(
     want_video = not no_video
     result = run_race(track, quad=quad_params, laps=laps, seed=seed, detector=detector, policy=policy,
                       backend=backend, randomize=randomize, latency_frames=latency, video=want_video,
-                      recipe=recipe, lookahead="race" if lookahead_race else lookahead)  # fmt: skip
+                      recipe=recipe, lookahead=racing() if lookahead_race else lookahead)  # fmt: skip
     out = out or Path("runs") / f"race-{datetime.now():%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
     r = result.report

@@ -8,14 +8,14 @@ trajectory and, when asked, the video frames.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from icarus_vision.estimator.config import config_for_detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.policy.export import ExportedPolicy
-from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, racing
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.racing.loop import LoopRecord, fly_loop
@@ -77,14 +77,12 @@ class RaceResult:
 
 
 def _lookahead(
-    policy: ExportedPolicy, cfg: EnvConfig, detector: str, mode: bool | str
+    policy: ExportedPolicy, cfg: EnvConfig, detector: str, config: LookaheadConfig
 ) -> Lookahead:
-    """The look-ahead filter of a race (``mode`` True or "race": its racing mode): with the
-    camera in the loop its model keeps ``VISION_MARGIN_M`` from the gates, which it knows only as
-    well as vision has measured them."""
+    """The look-ahead filter of a race: with the camera in the loop its model keeps
+    ``VISION_MARGIN_M`` from the gates, which it knows only as well as vision has measured them."""
     margin = 0.0 if detector == "oracle" else VISION_MARGIN_M
-    config = racing(margin) if mode == "race" else LookaheadConfig(margin_m=margin)
-    return Lookahead(policy, cfg, config)
+    return Lookahead(policy, cfg, replace(config, margin_m=margin))
 
 
 def _pilot(policy: ExportedPolicy | str, quad: QuadParams):
@@ -108,7 +106,7 @@ def run_race(
     video: bool = False,
     recipe: str | None = "gates-v1",
     open_loop: bool = False,
-    lookahead: bool | str = False,
+    lookahead: bool | LookaheadConfig = False,
 ) -> RaceResult:
     """Fly ``track`` once with camera, detector, estimator and pilot in the loop.
 
@@ -129,8 +127,9 @@ def run_race(
         open_loop: the pilot flies on the truth while camera, detector and estimator run and are
             recorded (``RaceResult.loop``): perception measured on the oracle's flight.
         lookahead: fly the policy through the look-ahead safety filter (``policy.lookahead``);
-            the report's ``policy`` then reads ``NAME+lookahead``. "race": the filter's racing
-            mode (``NAME+lookahead-race``).
+            True: its default settings, or a ``LookaheadConfig`` (its ``margin_m`` is the race's:
+            ``VISION_MARGIN_M`` with a detector); the report's ``policy`` then reads
+            ``NAME+lookahead``, or ``NAME+lookahead-race`` in the racing mode (``racing()``).
     """
     check_backend(backend)
     if latency_frames < 0:
@@ -148,9 +147,10 @@ def run_race(
     pilot_spec = resolve_policy(policy, track=base)
     if isinstance(pilot_spec, ExportedPolicy):
         pilot_spec.check_quad(quad)
-    if lookahead not in (False, True, "race"):
-        raise ValueError(f"lookahead must be True, False or 'race', got {lookahead!r}")
-    if lookahead and not isinstance(pilot_spec, ExportedPolicy):
+    if not isinstance(lookahead, (bool, LookaheadConfig)):
+        raise ValueError(f"lookahead must be a bool or a LookaheadConfig, got {lookahead!r}")
+    la = LookaheadConfig() if lookahead is True else lookahead or None
+    if la is not None and not isinstance(pilot_spec, ExportedPolicy):
         raise ValueError("--lookahead filters an exported policy, not the scripted controller")
     ghost = planned_ghost(base, quad)
     obs_mode = pilot_spec.observation if isinstance(pilot_spec, ExportedPolicy) else "basic"
@@ -193,7 +193,7 @@ def run_race(
         rec = fly_loop(env, _pilot(pilot_spec, quad), cfg.obs_dim, detector=detector_obj or detector, camera=camera,
                        scene=scene, seed=seed, prior=base, latency_frames=latency_frames, on_frame=on_frame,
                        estimator=config_for_detector(det_name), look=look, open_loop=open_loop,
-                       lookahead=_lookahead(pilot_spec, cfg, det_name, lookahead) if lookahead else None)  # fmt: skip
+                       lookahead=None if la is None else _lookahead(pilot_spec, cfg, det_name, la))  # fmt: skip
     finally:
         env.close()
         if scene is not None:
@@ -213,8 +213,8 @@ def run_race(
         },
     }
     policy_name = pilot_spec.name if isinstance(pilot_spec, ExportedPolicy) else "scripted"
-    if lookahead:
-        policy_name += "+lookahead-race" if lookahead == "race" else "+lookahead"
+    if la is not None:
+        policy_name += "+lookahead-race" if la.race_amplitudes else "+lookahead"
     report = {
         "track": base.name, "laps": base.laps, "seed": seed, "quad": quad.name,
         "detector": det_name, "policy": policy_name, "backend": backend,

@@ -126,10 +126,12 @@ def test_lookahead_flies_the_race_and_says_so():
         assert r.report["finished"], r.report
     with pytest.raises(ValueError, match="scripted"):
         run_race("single-gate", detector="oracle", policy="scripted", lookahead=True)
-    r = run_race("single-gate", detector="oracle", seed=2, lookahead="race")
+    from icarus_vision.policy.lookahead import racing
+
+    r = run_race("single-gate", detector="oracle", seed=2, lookahead=racing())
     assert r.report["policy"] == "default+lookahead-race" and r.report["finished"]
     with pytest.raises(ValueError, match="lookahead"):
-        run_race("single-gate", detector="oracle", lookahead="fast")
+        run_race("single-gate", detector="oracle", lookahead="race")  # the config, not a name
 
 
 def test_the_believed_race_puts_the_gates_where_vision_has_them():
