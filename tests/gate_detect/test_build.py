@@ -260,3 +260,13 @@ def test_graft_takes_the_input_size_with_the_refiner_and_keeps_its_own_for_a_res
     )
     assert refined["model"]["input_size"] == shipped_size
     assert refined["decode"]["min_snapped"] == meta["decode"]["min_snapped"] - 1
+
+
+def test_a_build_keeps_its_own_name_beside_its_datasets_names(tmp_path):
+    from icarus_vision.gate_detect.cnn.build import load_build
+
+    path = tmp_path / "b.toml"
+    path.write_text(BUILD.format(recipe="gates-v1"))
+    spec = load_build(path)
+    assert spec.name == "tiny"
+    assert [d.name for d in spec.datasets] == ["a", "b"]

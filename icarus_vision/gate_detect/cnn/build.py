@@ -126,13 +126,13 @@ def load_build(path: str | Path) -> BuildSpec:
         spec = StageSpec(**check_table(StageSpec, table, f"{src}: [{stage}]", ValueError))
         for key in ("data", "val"):
             for ref in getattr(spec, key):
-                name, share = split_share(ref)
+                ref_name, share = split_share(ref)
                 if share is not None and (key != "data" or stage not in TRAINING):
                     raise ValueError(
                         f"{src}: [{stage}].{key}: shares (name:share) are for the data of "
                         f"{', '.join(f'[{t}]' for t in TRAINING)} only"
                     )
-                if name not in names:
+                if ref_name not in names:
                     raise ValueError(
                         f"{src}: [{stage}].{key}: {ref!r} names no dataset of the build"
                     )
