@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from icarus_vision.fileio import atomic_write_json
+from icarus_vision.policy.callbacks import episode_success
 from icarus_vision.policy.evaluate import evaluate_policy
 from icarus_vision.policy.export import ExportedPolicy, _write, load_policy
 from icarus_vision.policy.features import obs_to_features
@@ -57,7 +58,7 @@ def collect(
         ys.append(action[live].copy())
         obs, _, done, infos = env.step(action)
         for i in np.flatnonzero(done & live):
-            finished[i] = infos[i]["gates_passed"] >= 10 and not infos[i]["crashed"]
+            finished[i] = episode_success(infos[i])
         over |= done
     return np.concatenate(xs), np.concatenate(ys), float(finished.mean())
 

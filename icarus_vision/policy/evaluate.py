@@ -6,7 +6,7 @@ import numpy as np
 
 from icarus_vision.policy.callbacks import episode_success
 from icarus_vision.policy.export import ExportedPolicy
-from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, as_config
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
@@ -91,11 +91,11 @@ def evaluate_policy(
         layout_difficulty=difficulty if base is None else None, randomization=RandomizationConfig(enabled=randomize), observation=obs_mode,
     )  # fmt: skip
     check_backend(backend)
+    la = as_config(lookahead)
     if isinstance(policy, ExportedPolicy):
         policy.check_quad(cfg.quad, "this evaluation")
-    elif lookahead:
+    elif la is not None:
         raise ValueError("--lookahead filters an exported policy, not the scripted controller")
-    la = (LookaheadConfig() if lookahead is True else lookahead) or None
     if backend == "batched":
         results = _run_batched(policy, cfg, episodes, seed, la)
     else:

@@ -57,11 +57,9 @@ def _check_version(version: str) -> None:
         )
 
 
-def _yaw_frame(
-    v: np.ndarray, c: np.ndarray, s: np.ndarray, out: np.ndarray | None = None
-) -> np.ndarray:
-    """Rotate world vectors (N, 3) by −yaw about z (into ``out`` (N, 3) when given)."""
-    out = np.empty((len(v), 3)) if out is None else out
+def _yaw_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Rotate world vectors (N, 3) by −yaw about z."""
+    out = np.empty((len(v), 3))
     x, y = v[:, 0], v[:, 1]
     out[:, 0] = c * x + s * y
     out[:, 1] = -s * x + c * y

@@ -89,6 +89,14 @@ def racing(margin_m: float = 0.0) -> LookaheadConfig:
     return LookaheadConfig(margin_m=margin_m, race_amplitudes=(0.25, 0.5), race_axes=(2,))
 
 
+def as_config(lookahead: bool | LookaheadConfig) -> LookaheadConfig | None:
+    """The filter a caller asked for: None for False, the default settings for True, a
+    ``LookaheadConfig`` as given; anything else is refused."""
+    if not isinstance(lookahead, (bool, LookaheadConfig)):
+        raise ValueError(f"lookahead must be a bool or a LookaheadConfig, got {lookahead!r}")
+    return LookaheadConfig() if lookahead is True else lookahead or None
+
+
 def candidate_offsets(
     amplitudes: tuple[float, ...], axes: tuple[int, ...] = (0, 1, 2, 3)
 ) -> np.ndarray:
@@ -293,4 +301,4 @@ class Lookahead:
         self._accel = np.where(went_on[:, None], self._accel + gain * (miss - self._accel), 0.0)
 
 
-__all__ = ["Lookahead", "LookaheadConfig", "candidate_offsets", "racing"]
+__all__ = ["Lookahead", "LookaheadConfig", "as_config", "candidate_offsets", "racing"]

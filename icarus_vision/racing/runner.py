@@ -15,7 +15,7 @@ import numpy as np
 from icarus_vision.estimator.config import config_for_detector
 from icarus_vision.gate_detect.registry import make_detector, parse_spec
 from icarus_vision.policy.export import ExportedPolicy
-from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, as_config
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.policy.scripted import ScriptedController
 from icarus_vision.racing.loop import LoopRecord, fly_loop
@@ -147,9 +147,7 @@ def run_race(
     pilot_spec = resolve_policy(policy, track=base)
     if isinstance(pilot_spec, ExportedPolicy):
         pilot_spec.check_quad(quad)
-    if not isinstance(lookahead, (bool, LookaheadConfig)):
-        raise ValueError(f"lookahead must be a bool or a LookaheadConfig, got {lookahead!r}")
-    la = LookaheadConfig() if lookahead is True else lookahead or None
+    la = as_config(lookahead)
     if la is not None and not isinstance(pilot_spec, ExportedPolicy):
         raise ValueError("--lookahead filters an exported policy, not the scripted controller")
     ghost = planned_ghost(base, quad)

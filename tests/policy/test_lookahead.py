@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from icarus_vision.policy.evaluate import evaluate_policy
-from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, candidate_offsets, racing
+from icarus_vision.policy.lookahead import (
+    Lookahead,
+    LookaheadConfig,
+    as_config,
+    candidate_offsets,
+    racing,
+)
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim import dynamics
 from icarus_vision.sim.config import EnvConfig
@@ -52,6 +58,18 @@ def test_candidates_start_with_the_policy_alone():
 def test_bad_settings_are_refused(kwargs):
     with pytest.raises(ValueError):
         LookaheadConfig(**kwargs)
+
+
+def test_the_filter_asked_for_is_a_bool_or_a_config():
+    assert as_config(False) is None
+    assert as_config(True) == LookaheadConfig()
+    assert as_config(racing()) == racing()
+    policy = resolve_policy("default")
+    for bad in ("race", 1, None):
+        with pytest.raises(ValueError, match="bool or a LookaheadConfig"):
+            as_config(bad)
+    with pytest.raises(ValueError, match="bool or a LookaheadConfig"):
+        evaluate_policy(policy, "single-gate", episodes=1, lookahead="race")
 
 
 def test_a_clear_flight_is_flown_unchanged():
