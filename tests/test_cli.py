@@ -228,20 +228,15 @@ def test_sigterm_stops_a_long_command_as_ctrl_c_does():
 
 def test_eval_policy_and_race_take_the_lookahead_filter(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    # on by default for a trained policy; --no-lookahead flies the bare policy
-    for flag, on in (([], True), (["--no-lookahead"], False), (["--lookahead"], True)):
-        res = runner.invoke(app, ["eval-policy", "--episodes", "2", "--gates", "2", *flag,
-                                  "--json", "e.json"])  # fmt: skip
-        assert res.exit_code == 0, res.output
-        assert ("look-ahead" in res.output) is on
-        assert json.loads((tmp_path / "e.json").read_text())["lookahead"] is on
-    res = runner.invoke(app, ["race", "--track", "single-gate", "--detector", "oracle",
+    res = runner.invoke(app, ["eval-policy", "--episodes", "2", "--gates", "2", "--lookahead",
+                              "--json", "e.json"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "look-ahead" in res.output
+    assert json.loads((tmp_path / "e.json").read_text())["lookahead"] is True
+    res = runner.invoke(app, ["race", "--track", "single-gate", "--detector", "oracle", "--lookahead",
                               "--no-video", "--json", "r.json", "--out", "r"])  # fmt: skip
     assert res.exit_code == 0, res.output
     assert json.loads((tmp_path / "r.json").read_text())["policy"] == "default+lookahead"
-    res = runner.invoke(app, ["race", "--track", "single-gate", "--detector", "oracle", "--no-video",
-                              "--lookahead-race", "--no-lookahead", "--out", "r2"])  # fmt: skip
-    assert res.exit_code != 0 and "drop --no-lookahead" in res.output
     res = runner.invoke(app, ["eval-policy", "--episodes", "2", "--gates", "2", "--lookahead-race",
                               "--json", "e.json"])  # fmt: skip
     assert res.exit_code == 0, res.output

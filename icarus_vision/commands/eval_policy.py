@@ -48,12 +48,9 @@ def eval_policy_cmd(
         False, "--randomize/--no-randomize", help="Domain randomisation."
     ),
     lookahead: bool = typer.Option(
-        None,
+        False,
         "--lookahead/--no-lookahead",
-        show_default=False,
-        help="Fly the policy through the look-ahead safety filter (the default for a trained "
-        "policy; --no-lookahead flies the bare policy, and the scripted controller is never "
-        "filtered): each step the next 0.6 s are "
+        help="Fly the policy through the look-ahead safety filter: each step the next 0.6 s are "
         "predicted in the nominal quadrotor model, and where the policy's own flight would crash "
         "the clearest of 40 corrected actions is flown instead.",
     ),
@@ -75,7 +72,7 @@ def eval_policy_cmd(
     """
     from icarus_vision.fileio import atomic_write_json, check_output
     from icarus_vision.policy.evaluate import evaluate_policy, time_optimal_fields
-    from icarus_vision.policy.lookahead import from_flags
+    from icarus_vision.policy.lookahead import racing
     from icarus_vision.policy.pilots import resolve_policy
     from icarus_vision.sim.builtin import resolve_track
     from icarus_vision.sim.quad import load_quad
@@ -86,7 +83,7 @@ def eval_policy_cmd(
     pilot = resolve_policy(policy, track=base)
     r = evaluate_policy(pilot, track, episodes=episodes, num_gates=gates, backend=backend,
                         randomize=randomize, seed=seed, difficulty=difficulty, quad=quad_params,
-                        lookahead=from_flags(lookahead, lookahead_race, policy))  # fmt: skip
+                        lookahead=racing() if lookahead_race else lookahead)  # fmt: skip
     r.update(time_optimal_fields(base, r["lap_time_s"]["median"], solve=plan, quad=quad_params))
     if json_path is not None:  # results first: nothing printed below can lose them
         atomic_write_json(json_path, r)

@@ -48,12 +48,9 @@ def race_cmd(
     ),
     latency: int = typer.Option(1, min=0, help="Perception latency in camera frames."),
     lookahead: bool = typer.Option(
-        None,
+        False,
         "--lookahead/--no-lookahead",
-        show_default=False,
-        help="Fly the policy through the look-ahead safety filter (the default for a trained "
-        "policy; --no-lookahead flies the bare policy, and the scripted controller is never "
-        "filtered): each step the next 0.6 s are "
+        help="Fly the policy through the look-ahead safety filter: each step the next 0.6 s are "
         "predicted in the nominal quadrotor model, on the gates as vision knows them, and where "
         "the policy's own flight would crash the clearest of 40 corrected actions is flown instead "
         "(the report's policy reads NAME+lookahead).",
@@ -77,7 +74,7 @@ def race_cmd(
     view, real time) and prints a summary.
     """
     from icarus_vision.fileio import atomic_write_json, check_output
-    from icarus_vision.policy.lookahead import from_flags
+    from icarus_vision.policy.lookahead import racing
     from icarus_vision.racing.plots import plot_trajectory
     from icarus_vision.racing.runner import run_race
     from icarus_vision.racing.video import write_video
@@ -90,7 +87,7 @@ def race_cmd(
     want_video = not no_video
     result = run_race(track, quad=quad_params, laps=laps, seed=seed, detector=detector, policy=policy,
                       backend=backend, randomize=randomize, latency_frames=latency, video=want_video,
-                      recipe=recipe, lookahead=from_flags(lookahead, lookahead_race, policy))  # fmt: skip
+                      recipe=recipe, lookahead=racing() if lookahead_race else lookahead)  # fmt: skip
     out = out or Path("runs") / f"race-{datetime.now():%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
     r = result.report

@@ -97,19 +97,6 @@ def as_config(lookahead: bool | LookaheadConfig) -> LookaheadConfig | None:
     return LookaheadConfig() if lookahead is True else lookahead or None
 
 
-def from_flags(lookahead: bool | None, race: bool, policy: str) -> bool | LookaheadConfig:
-    """The filter the command line asks for: ``--lookahead-race`` its racing mode,
-    ``--lookahead`` / ``--no-lookahead`` on or off, and neither the default — on for every
-    trained policy, off for the scripted controller (which it cannot filter)."""
-    if race:
-        if lookahead is False:
-            raise ValueError("--lookahead-race flies through the filter: drop --no-lookahead")
-        return racing()
-    if lookahead is None:
-        return policy != "scripted"
-    return lookahead
-
-
 def candidate_offsets(
     amplitudes: tuple[float, ...], axes: tuple[int, ...] = (0, 1, 2, 3)
 ) -> np.ndarray:

@@ -13,7 +13,6 @@ from icarus_vision.policy.lookahead import (
     LookaheadConfig,
     as_config,
     candidate_offsets,
-    from_flags,
     racing,
 )
 from icarus_vision.policy.pilots import resolve_policy
@@ -71,18 +70,6 @@ def test_the_filter_asked_for_is_a_bool_or_a_config():
             as_config(bad)
     with pytest.raises(ValueError, match="bool or a LookaheadConfig"):
         evaluate_policy(policy, "single-gate", episodes=1, lookahead="race")
-
-
-def test_the_command_line_flies_trained_policies_through_the_filter_by_default():
-    assert from_flags(None, False, "default") is True
-    assert from_flags(None, False, "runs/x/policy.safetensors") is True
-    assert from_flags(None, False, "scripted") is False  # it cannot filter the controller
-    assert from_flags(False, False, "default") is False
-    assert from_flags(True, False, "scripted") is True  # asked for: run_race then refuses it
-    assert from_flags(None, True, "default") == racing()
-    assert from_flags(True, True, "default") == racing()
-    with pytest.raises(ValueError, match="drop --no-lookahead"):
-        from_flags(False, True, "default")
 
 
 def test_a_clear_flight_is_flown_unchanged():

@@ -92,9 +92,7 @@ def test_eval_policy_flies_the_quad_file(tmp_path):
     # a drone that cannot lift itself (thrust-to-weight 1.05 with the policy's hover command of a
     # 4:1 drone) finishes nothing that the built-in drone finishes
     weak = quad_file(tmp_path, "weak", ttw=1.05)
-    # the bare policy: the look-ahead filter would carry the weak drone through
-    args = ["eval-policy", "--policy", "default", "--track", "single-gate", "--no-lookahead"]
-    args += ["--episodes", "4"]
+    args = ["eval-policy", "--policy", "default", "--track", "single-gate", "--episodes", "4"]
     built_in = CliRunner().invoke(app, [*args, "--json", str(tmp_path / "a.json")])
     assert built_in.exit_code == 0, built_in.output
     res = CliRunner().invoke(app, [*args, "--quad", str(weak), "--json", str(tmp_path / "b.json")])
