@@ -299,7 +299,9 @@ class GateEstimator:
         self.counts.update(f"rejected_{r}" for r in reasons if r is not None)
         if sols is None:
             return False
-        pairs, unmatched, left = match_detections(sols, self.tracks, size, r_wc, t_wc, self.config)
+        pairs, unmatched, left = match_detections(
+            sols, self.tracks, size, r_wc, t_wc, self.config, odom.t
+        )
         self.counts["duplicates"] += left
         # What match_detections neither matched, kept as outliers nor left over lay under the floor.
         self.counts["below_ground"] += len(sols.distance) - len(pairs) - len(unmatched) - left

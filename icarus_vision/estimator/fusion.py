@@ -223,6 +223,7 @@ def match_detections(
     r_world_cam: np.ndarray,
     t_world_cam: np.ndarray,
     cfg: EstimatorConfig,
+    t: float = float("nan"),
 ) -> tuple[list[tuple[float, int, GateMeasurement]], list[GateMeasurement], int]:
     """Associate the frame's detections with gate tracks, at most one detection per track.
 
@@ -236,6 +237,8 @@ def match_detections(
 
     Args:
         new_size: gate size of a measurement that fits no track, m.
+        t: the frame's time, s: a track measured within ``confirmed_s`` before it allows only
+            ranges within ``confirmed_range_ratio`` of its own (NaN: no track counts as measured).
 
     Returns:
         (score, track index, measurement) of each matched detection, the measurements of the
@@ -252,6 +255,8 @@ def match_detections(
     track_range = np.linalg.norm(means[:, :3] - t_world_cam, axis=1)
     track_spread = 2.0 * np.sqrt(np.trace(covs[:, :3, :3], axis1=1, axis2=2))
     ratio = cfg.filter.range_ratio
+    confirmed = np.array([t - tr.last_hit_t <= cfg.filter.confirmed_s for tr in tracks])
+    tight = cfg.filter.confirmed_range_ratio
     score = np.full((n_det, len(tracks)), np.inf)
     slot = np.zeros((n_det, len(tracks)), int)
     alt = np.full((n_det, len(tracks)), np.inf)
@@ -262,6 +267,9 @@ def match_detections(
         seen = m.distance[..., None]  # (D, 2, 1) against (M,)
         off_range = (seen > ratio * (track_range[idx] + track_spread[idx])) | (
             seen * ratio < track_range[idx] - track_spread[idx]
+        )
+        off_range |= confirmed[idx] & (
+            (seen > tight * track_range[idx]) | (seen * tight < track_range[idx])
         )
         below_floor = (m.z[:, :, 2] < cfg.measurement.min_height_m)[..., None]
         top, d2, slot[:, idx], alt[:, idx] = _track_scores(
