@@ -237,8 +237,9 @@ def match_detections(
 
     Args:
         new_size: gate size of a measurement that fits no track, m.
-        t: the frame's time, s: a track measured within ``confirmed_s`` before it allows only
-            ranges within ``confirmed_range_ratio`` of its own (NaN: no track counts as measured).
+        t: the frame's time, s: a track nearer than ``confirmed_within_m`` and measured within
+            ``confirmed_s`` before it allows only ranges within ``confirmed_range_ratio`` of its
+            own (NaN: no track counts as measured).
 
     Returns:
         (score, track index, measurement) of each matched detection, the measurements of the
@@ -253,9 +254,10 @@ def match_detections(
     track_size = np.array([tr.size for tr in tracks])
     off_bearing = bearing_sq(sol, means, covs, r_world_cam, t_world_cam) > cfg.filter.bearing_chi2
     track_range = np.linalg.norm(means[:, :3] - t_world_cam, axis=1)
+    recent = np.array([t - tr.last_hit_t <= cfg.filter.confirmed_s for tr in tracks], bool)
+    confirmed = recent & (track_range < cfg.filter.confirmed_within_m)
     track_spread = 2.0 * np.sqrt(np.trace(covs[:, :3, :3], axis1=1, axis2=2))
     ratio = cfg.filter.range_ratio
-    confirmed = np.array([t - tr.last_hit_t <= cfg.filter.confirmed_s for tr in tracks])
     tight = cfg.filter.confirmed_range_ratio
     score = np.full((n_det, len(tracks)), np.inf)
     slot = np.zeros((n_det, len(tracks)), int)

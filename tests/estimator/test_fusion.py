@@ -209,14 +209,17 @@ def test_a_read_of_the_outer_edge_does_not_move_a_gate_just_measured():
     noisy = MeasurementConfig(pixel_sigma=12.0)
     cov = np.diag([0.35**2, 0.17**2, 0.09**2, math.radians(5.0) ** 2])
     sols, _ = solve_detections([det], CAM.K, SIZE, r_wc, t_wc, noisy, 1.0)
-    for ratio, last_hit, matched in ((math.inf, 0.95, 1), (1.3, 0.95, 0), (1.3, 0.5, 1)):
+    cases = ((math.inf, 0.95, 6.0, 1), (1.3, 0.95, 6.0, 0), (1.3, 0.5, 6.0, 1), (1.3, 0.95, 2.0, 1))
+    for ratio, last_hit, within, matched in cases:  # the last: the rule only for nearer gates
         gate = GateTrack(np.array([3.0, 0.0, 2.0]), 0.0, cov, 1.0, 0.0, True)
         gate.record_hit(last_hit)
-        cfg = EstimatorConfig(measurement=noisy, filter=FilterConfig(confirmed_range_ratio=ratio))
+        f_cfg = FilterConfig(confirmed_range_ratio=ratio, confirmed_within_m=within)
+        cfg = EstimatorConfig(measurement=noisy, filter=f_cfg)
         pairs, unmatched, _ = match_detections(sols, [gate], 1.0, r_wc, t_wc, cfg, od.t)
         assert len(pairs) == matched and len(unmatched) == 1 - matched, (ratio, last_hit)
-    with pytest.raises(ValueError, match="confirmed_range_ratio"):
-        FilterConfig(confirmed_range_ratio=1.0)
+    for bad in ({"confirmed_range_ratio": 1.0}, {"confirmed_within_m": 0.0}):
+        with pytest.raises(ValueError, match="confirmed_range_ratio"):
+            FilterConfig(**bad)
     # off for every detector until it is measured to fly more races (docs/estimation.md)
     assert config_for_detector("cnn").filter.confirmed_range_ratio == math.inf
 
