@@ -13,7 +13,10 @@ wind. What the model misses shows each step as the measured velocity against the
 that difference, low-pass filtered, is added to every prediction as a world acceleration.
 
 Predictions of all drones and all candidates run as one batch; the candidates only for the drones
-whose own flight would crash.
+whose own flight would crash. A clear prediction of the policy's own flight is kept and not made
+again while the drone keeps to it (position, velocity, next gate and the gates it knows, each within
+a tolerance) for up to ``keep_s``; that prediction runs ``keep_s`` further ahead, so the filter
+still sees ``horizon_s`` ahead at every step. One prediction then covers several control steps, which is what makes the filter cheap enough for a single drone in real time.
 
 In its racing mode (``racing()``, `--lookahead-race`) the filter also improves on a flight that
 stays clear: it tries the policy's action with the pitch rate offset by ±0.25 and ±0.5 for 0.2 s and
@@ -31,7 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from icarus_vision.policy.export import ExportedPolicy
-from icarus_vision.sim import dynamics
+from icarus_vision.sim import dynamics, rules
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.env import integrate_batched
 from icarus_vision.sim.race_core import RaceCore
@@ -63,6 +66,19 @@ class LookaheadConfig:
     race_margin_m: float = 0.3
     """A candidate other than the policy's own action is flown for speed only when its flight
     keeps this much more from frames and ground than ``margin_m``."""
+    keep_s: float = 0.2
+    """How long a clear prediction of the policy's own flight is trusted at most, without
+    predicting again, while the drone keeps to it. That prediction runs ``horizon_s + keep_s``
+    ahead, so a kept one still covers ``horizon_s``. 0: predict every step (as racing mode does)."""
+    keep_pos_m: float = 0.05
+    """How far the drone may be from where the kept prediction put it."""
+    keep_vel_mps: float = 0.3
+    """How far its velocity may be from the kept prediction's."""
+    keep_gate_m: float = 0.05
+    """How far any gate it knows may have moved since the prediction (gates known from vision)."""
+    keep_margin_m: float = 0.05
+    """A prediction is kept only while the rest of its flight passes frames, ground and bounds
+    with at least this much room to spare; a flight closer to a crash is predicted again."""
 
     def __post_init__(self) -> None:
         if not self.horizon_s > 0:
@@ -81,6 +97,9 @@ class LookaheadConfig:
             )
         if not self.race_axes or any(a not in (0, 1, 2, 3) for a in self.race_axes):
             raise ValueError(f"lookahead race_axes must be action axes 0–3, got {self.race_axes}")
+        for name in ("keep_s", "keep_pos_m", "keep_vel_mps", "keep_gate_m", "keep_margin_m"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"lookahead {name} must be >= 0, got {getattr(self, name)}")
 
 
 def racing(margin_m: float = 0.0) -> LookaheadConfig:
@@ -117,6 +136,21 @@ def _score(clear, gates, ret, crash_step) -> np.ndarray:
     return np.where(clear, 1e9 + 1e4 * gates + ret, crash_step.astype(float))
 
 
+def _clearance(model: RaceCore, rows: np.ndarray, trails: np.ndarray) -> np.ndarray:
+    """(n, T) the least room a sphere of the model's radius has at each step of ``trails``
+    (n, T, S, 3) sub-step positions of the model's drones ``rows``: to any gate's frame, the
+    ground and the bounds, metres (inf after a flight ended: NaN positions)."""
+    n, t, sub, _ = trails.shape
+    pts = trails.reshape(n, t * sub, 1, 3)
+    local = rules.to_gate_frame(pts, model.g_pos[rows][:, None], model.g_yaw[rows][:, None])
+    bars = rules.bar_distance_local(local, model.g_size[rows][:, None], model.g_fw[rows][:, None])
+    bars = np.where(model.g_mask[rows][:, None], bars, np.inf).min(axis=2)
+    p = pts[:, :, 0]
+    box = np.minimum(p - model.bounds_lo[rows][:, None], model.bounds_hi[rows][:, None] - p)
+    room = np.minimum(np.minimum(bars, p[..., 2]) - model.params.radius, box.min(axis=2))
+    return np.nan_to_num(room, nan=np.inf).reshape(n, t, sub).min(axis=2)
+
+
 class Lookahead:
     """A policy with a look-ahead safety filter (``act`` as a pilot of N drones).
 
@@ -144,8 +178,14 @@ class Lookahead:
             if self.config.race_amplitudes
             else self.offsets[:1]
         )
+        racing_mode = len(self.race_offsets) > 1
+        self.keep_steps = 0 if racing_mode else round(self.config.keep_s * cfg.ctrl_hz)
+        """Control steps a clear prediction is kept for at most (0: predict every step)."""
         self.interventions = 0
         """Drone-steps on which the filter changed the policy's action."""
+        self.predictions = 0
+        """Drone-steps on which the policy's own flight was predicted (the rest kept one)."""
+        self._plan: dict[str, np.ndarray] | None = None  # the kept predictions (per drone)
         self._models: dict[tuple[int, float], RaceCore] = {}
         self._accel: np.ndarray | None = None  # (N, 3) disturbance estimate, m/s²
         self._pred_vel: np.ndarray | None = None  # (N, 3) velocity the model predicted
@@ -176,10 +216,14 @@ class Lookahead:
         if idx.size and len(self.race_offsets) > 1:
             idx = self._race(core, state, obs, idx, action)
         if idx.size:
-            crash_step = self._predict(core, state, obs, idx, self.offsets[:1])[0][:, 0]
-            bad = idx[crash_step < self.horizon]
+            idx = idx[~self._kept(core, state, idx)]
+        if idx.size:
+            crash_step = self._predict_own(core, state, obs, idx)
+            bad = idx[crash_step[:, 0] < self.horizon]
             if bad.size:
-                crash_step, gates, ret, first = self._predict(core, state, obs, bad, self.offsets)
+                crash_step, gates, ret, first, _ = self._predict(
+                    core, state, obs, bad, self.offsets
+                )
                 score = _score(crash_step >= self.horizon, gates, ret, crash_step)
                 action[bad] = first[np.arange(bad.size), score.argmax(axis=1)]
                 self.interventions += int(bad.size)
@@ -189,7 +233,7 @@ class Lookahead:
     def _race(self, core, state, obs, idx, action) -> np.ndarray:
         """Fly the race candidate that gets furthest where one stays clear with the race margin
         (writes ``action``); returns the drones where none does, for the safety filter."""
-        crash_step, gates, ret, first = self._predict(
+        crash_step, gates, ret, first, _ = self._predict(
             core, state, obs, idx, self.race_offsets, self.config.race_margin_m
         )
         score = _score(crash_step >= self.horizon, gates, ret, crash_step)
@@ -199,6 +243,61 @@ class Lookahead:
         action[idx[moved]] = first[np.flatnonzero(moved), best[moved]]
         self.interventions += int(moved.sum())
         return idx[~fine]
+
+    # -- kept predictions ----------------------------------------------------------------------
+    def _predict_own(self, core: RaceCore, state, obs, idx: np.ndarray) -> np.ndarray:
+        """(len(idx), 1) crash steps of the policy's own flight; the flights that can be kept
+        (also clear ``keep_s`` further) are."""
+        self.predictions += int(idx.size)
+        if not self.keep_steps:
+            return self._predict(core, state, obs, idx, self.offsets[:1])[0]
+        steps = self.horizon + self.keep_steps
+        crash_step, _, _, _, path = self._predict(
+            core, state, obs, idx, self.offsets[:1], steps=steps, record=True
+        )
+        self._keep(core, idx, crash_step[:, 0] >= steps, path)
+        return crash_step
+
+    def _kept(self, core: RaceCore, state, idx: np.ndarray) -> np.ndarray:
+        """(len(idx),) bool: drones whose kept clear prediction still holds (counts a step)."""
+        plan, c = self._plan, self.config
+        if plan is None or plan["age"].shape[0] != core.n:
+            return np.zeros(idx.size, dtype=bool)
+        age = plan["age"][idx] + 1
+        j = np.minimum(age, self.keep_steps) - 1  # the predicted step the drone is at now
+        near = lambda a, b, tol: np.linalg.norm(a - b, axis=-1) <= tol  # noqa: E731  NaN: False
+        ok = (
+            (age <= self.keep_steps)
+            & (np.abs(core.t[idx] - plan["t"][idx] - age * self.cfg.dt) < 1e-6)  # not reset
+            & (core.target[idx] == plan["target"][idx, j])
+            & near(state.pos[idx], plan["pos"][idx, j], c.keep_pos_m)
+            & near(state.vel[idx], plan["vel"][idx, j], c.keep_vel_mps)
+            & near(core.g_pos[idx], plan["gates"][idx], c.keep_gate_m).all(axis=1)
+            & (plan["room"][idx, np.minimum(age, plan["room"].shape[1] - 1)] >= c.keep_margin_m)
+        )
+        plan["age"][idx[ok]] = age[ok]
+        return ok
+
+    def _keep(self, core: RaceCore, idx: np.ndarray, clear: np.ndarray, path: dict) -> None:
+        """Keep the new predictions of drones ``idx`` (only the clear ones can be kept)."""
+        plan = self._plan
+        if (
+            plan is None
+            or plan["age"].shape[0] != core.n
+            or plan["gates"].shape != core.g_pos.shape
+        ):
+            h = self.horizon + self.keep_steps
+            plan = self._plan = {
+                "age": np.full(core.n, np.iinfo(np.int64).max // 2), "t": np.zeros(core.n),
+                "target": np.zeros((core.n, h), np.int64), "pos": np.zeros((core.n, h, 3)),
+                "vel": np.zeros((core.n, h, 3)), "gates": np.zeros(core.g_pos.shape),
+                "room": np.zeros((core.n, h)),
+            }  # fmt: skip
+        plan["age"][idx] = np.where(clear, 0, np.iinfo(np.int64).max // 2)
+        plan["t"][idx] = core.t[idx]
+        plan["gates"][idx] = core.g_pos[idx]
+        for name in ("target", "pos", "vel", "room"):
+            plan[name][idx] = path[name]
 
     # -- the model -----------------------------------------------------------------------------
     def _model(
@@ -224,13 +323,17 @@ class Lookahead:
         model.gust_amp = np.zeros((m, 3, 3))
         return model
 
-    def _predict(self, src, state, obs, idx, offsets, extra_margin=0.0):
-        """Fly drones ``idx`` from ``state`` for the horizon once per offset.
+    def _predict(self, src, state, obs, idx, offsets, extra_margin=0.0, steps=None, record=False):
+        """Fly drones ``idx`` from ``state`` for ``steps`` (the horizon) once per offset.
 
         Returns:
-            crash step (n, K) (the horizon where none), gates passed (n, K), reward sum (n, K),
-            and the first actions (n, K, 4).
+            crash step (n, K) (``steps`` where none), gates passed (n, K), reward sum (n, K),
+            the first actions (n, K, 4), and with ``record`` the flight of the first offset:
+            ``pos``, ``vel`` (n, steps, 3) and ``target`` (n, steps) after each step (NaN and -1
+            after it ended), and ``room`` (n, steps): the least clearance from frames, ground and
+            bounds over that step and all later ones, metres (None without ``record``).
         """
+        steps = steps or self.horizon
         k = len(offsets)
         model = self._model(src, idx, k, extra_margin)
         rep = lambda a: np.repeat(a[idx], k, axis=0)  # noqa: E731
@@ -241,28 +344,44 @@ class Lookahead:
         offset = np.tile(offsets, (idx.size, 1))
         x = np.repeat(obs[idx], k, axis=0)
         alive = np.ones(model.n, dtype=bool)
-        crash_step = np.full(model.n, self.horizon)
+        crash_step = np.full(model.n, steps)
         ret = np.zeros(model.n)
         first = None
-        for h in range(self.horizon):
+        if record:
+            path = {
+                "pos": np.full((idx.size, steps, 3), np.nan),
+                "vel": np.full((idx.size, steps, 3), np.nan),
+                "target": np.full((idx.size, steps), -1, np.int64),
+            }
+            trails = np.full((idx.size, steps, self.cfg.substeps, 3), np.nan)
+            base = np.arange(idx.size) * k
+        for h in range(steps):
             a = np.asarray(self.policy.act(x), dtype=np.float32)
             if h < self.hold:
                 a = np.clip(a + offset, -1.0, 1.0).astype(np.float32)
             if h == 0:
                 first = a
-            reward, crashed, finished = self._step(model, s, a, accel)
+            reward, crashed, finished, trail = self._step(model, s, a, accel)
             ret += np.where(alive, reward, 0.0)
             crash_step[alive & crashed] = h
+            if record:
+                path["pos"][:, h], path["vel"][:, h] = s.pos[base], s.vel[base]
+                path["target"][:, h] = model.target[base]
+                trails[:, h] = trail[:, base].swapaxes(0, 1)
             alive &= ~(crashed | finished)
             if not alive.any():
                 break
             x = model.observe(s, model.last_rpy)
+        if record:
+            room = _clearance(model, base, trails)
+            path["room"] = np.minimum.accumulate(room[:, ::-1], axis=1)[:, ::-1]
         shape = (idx.size, k)
         return (
             crash_step.reshape(shape),
             model.target.reshape(shape),
             ret.reshape(shape),
             first.reshape(*shape, 4),
+            path if record else None,
         )
 
     @staticmethod
@@ -275,7 +394,7 @@ class Lookahead:
         reward, _, _, crash, _ = model.finish_step(
             p0, state, frame_hit, ground_hit, trail, action=action
         )
-        return reward, crash >= 0, model.target >= model.n_pass
+        return reward, crash >= 0, model.target >= model.n_pass, trail
 
     # -- disturbance ---------------------------------------------------------------------------
     def _remember(self, core: RaceCore, state, action: np.ndarray) -> None:
@@ -283,10 +402,12 @@ class Lookahead:
         misses is the disturbance)."""
         if self.config.disturbance_gain == 0:
             return
-        idx = np.arange(core.n)
-        model = self._model(core, idx, 1)
+        model = self._model(core, np.arange(core.n), 1)
         s = state.copy()
-        self._step(model, s, action, None)
+        thrust_cmd, rate_cmd = dynamics.action_to_commands(action, model.params)
+        dynamics.step_substeps(s, thrust_cmd, rate_cmd, model.wind(), model.params,
+                               1.0 / self.cfg.physics_hz, self.cfg.substeps,
+                               ground_clamp=~model.taken_off)  # fmt: skip
         self._pred_vel = s.vel
         self._t = core.t.copy()
 

@@ -299,7 +299,7 @@ def step_substeps(
         if ground_clamp is not None:
             low = ground_clamp & (state.pos[:, 2] < params.radius)
             if low.any():
-                state.pos[low, 2] = params.radius
+                state.pos[low, 2] = np.broadcast_to(params.radius, low.shape)[low]
                 state.vel[low, 2] = np.maximum(state.vel[low, 2], 0.0)
         trail[s] = state.pos
     return trail

@@ -139,7 +139,8 @@ def trail_frame_collision(
         (c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]), axis=-1
     )
     dist_sq = bar_distance_sq_local(local, size[ni, gi], frame_width[ni, gi])
-    hit[ni[(dist_sq < radius**2).any(axis=0)]] = True
+    r = np.broadcast_to(radius, hit.shape)[ni]
+    hit[ni[(dist_sq < r * r).any(axis=0)]] = True
     return hit
 
 

@@ -53,7 +53,8 @@ def test_candidates_start_with_the_policy_alone():
     "kwargs",
     [{"horizon_s": 0}, {"offset_s": 1.0}, {"amplitudes": ()}, {"amplitudes": (3.0,)},
      {"disturbance_gain": 1.5}, {"margin_m": -0.1}, {"race_amplitudes": (0.0,)},
-     {"race_amplitudes": (0.5,), "race_axes": (4,)}, {"race_amplitudes": (0.5,), "race_axes": ()}],
+     {"race_amplitudes": (0.5,), "race_axes": (4,)}, {"race_amplitudes": (0.5,), "race_axes": ()},
+     {"keep_s": -0.1}, {"keep_pos_m": -1}, {"keep_margin_m": float("nan")}],
 )  # fmt: skip
 def test_bad_settings_are_refused(kwargs):
     with pytest.raises(ValueError):
@@ -93,6 +94,51 @@ def airborne(height: float) -> tuple[BatchedRacingVecEnv, np.ndarray]:
     env.state.pos[0, 2] = height
     env.core.taken_off[:] = True
     return env, env.core.observe(env.state)
+
+
+def hovering(height: float) -> tuple[BatchedRacingVecEnv, np.ndarray, ConstantPilot]:
+    """One drone hovering at ``height``, its observation and a pilot that holds it there."""
+    quad = QuadParams()
+    env, obs = airborne(height)
+    env.state.thrust[:] = quad.mass * GRAVITY
+    return env, obs, ConstantPilot([hover_thrust(quad), 0, 0, 0])
+
+
+def fly(env, filt, obs, steps: int) -> np.ndarray:
+    for _ in range(steps):
+        obs, *_ = env.step(filt.act(env.core, env.state, obs))
+    return obs
+
+
+def test_a_clear_prediction_is_kept_while_the_flight_keeps_to_it():
+    """Hovering high, one prediction covers keep_s (10 steps); a push or a moved gate makes the
+    filter predict again at once."""
+    env, obs, pilot = hovering(3.0)
+    filt = Lookahead(pilot, env.config)
+    assert filt.keep_steps == 10
+    obs = fly(env, filt, obs, 30)
+    assert filt.predictions == 3
+    env.state.vel[0, 0] += 1.0  # pushed: off its prediction
+    obs = fly(env, filt, obs, 1)
+    assert filt.predictions == 4
+    env.core.g_pos[0, 3, 1] += 0.2  # a gate seen elsewhere
+    obs = fly(env, filt, obs, 1)
+    assert filt.predictions == 5
+    every = Lookahead(pilot, env.config, LookaheadConfig(keep_s=0))
+    fly(env, every, obs, 12)
+    assert every.predictions == 12 and every.keep_steps == 0
+
+
+def test_a_flight_with_little_room_is_predicted_every_step():
+    """Hovering 3 cm over the ground is clear, but closer than keep_margin_m (5 cm): nothing is
+    kept; 30 cm over it, predictions are kept."""
+    quad = QuadParams()
+    for height, expected in ((0.03, 12), (0.3, 2)):
+        env, obs, pilot = hovering(quad.radius + height)
+        filt = Lookahead(pilot, env.config)
+        fly(env, filt, obs, 12)
+        assert filt.interventions == 0
+        assert filt.predictions == expected, height
 
 
 def test_a_predicted_crash_is_averted():

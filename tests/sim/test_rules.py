@@ -196,3 +196,16 @@ def test_crossing_centrality_falls_from_the_centre_to_the_edge():
     assert passed.tolist() == [True, True, True, False, False]
     assert central == pytest.approx([1.0, 0.5, 0.1, 0.0, 0.0])
     assert passed.tolist() == rules.gate_passage(p0, p1, gate, np.zeros(5), np.ones(5)).tolist()
+
+
+def test_trail_collision_takes_a_radius_per_drone():
+    """Two drones at the same point 0.12 m beside a bar: only the one with the larger sphere
+    touches it."""
+    p = np.tile([0.0, -0.72, 0.0], (2, 1))
+    trail = np.stack([p, p])  # (S=2, N=2, 3)
+    gates = dict(gate_pos=np.zeros((2, 1, 3)), gate_cos=np.ones((2, 1)), gate_sin=np.zeros((2, 1)),
+                 size=np.ones((2, 1)), frame_width=np.full((2, 1), 0.1), reach=np.full((2, 1), 1.0),
+                 gate_mask=np.ones((2, 1), bool))  # fmt: skip
+    hit = rules.trail_frame_collision(trail, np.array([0.1, 0.15]), **gates)
+    assert hit.tolist() == [False, True]
+    assert rules.trail_frame_collision(trail, 0.15, **gates).tolist() == [True, True]
