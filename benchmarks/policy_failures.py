@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/policy_failures.py [--policy default] [--episodes 300]
         [--seed 5000] [--gates 10] [--difficulty 1.0] [--no-randomize] [--lookahead]
-        [--lookahead-race] [--json PATH]
+        [--lookahead-race] [--keep-s S] [--json PATH]
 
 Flies ``--episodes`` random race layouts (ground truth, randomisation on: the finish-rate setting of
 ``policy_speed.py``) and, for every gate the policy flew to, records whether it got through. Prints
@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import argparse
 from collections import defaultdict
+from dataclasses import replace
 
 import numpy as np
 
 from icarus_vision.fileio import atomic_write_json
-from icarus_vision.policy.lookahead import Lookahead, racing
+from icarus_vision.policy.lookahead import Lookahead, LookaheadConfig, racing
 from icarus_vision.policy.pilots import resolve_policy
 from icarus_vision.sim.config import EnvConfig, RandomizationConfig
 from icarus_vision.sim.rules import crossing_alignment
@@ -94,6 +95,10 @@ def main() -> None:
         help="the filter in its racing mode (eval-policy --lookahead-race)",
     )  # fmt: skip
     ap.add_argument(
+        "--keep-s", type=float, default=None,
+        help="the filter's keep_s (0: predict every step; default: LookaheadConfig's)",
+    )  # fmt: skip
+    ap.add_argument(
         "--no-randomize", action="store_true",
         help="nominal quadrotor, no wind, gates where the layout puts them (what randomisation costs)",
     )  # fmt: skip
@@ -108,7 +113,10 @@ def main() -> None:
     env.seed(a.seed)
     obs = env.reset()
     a.lookahead = a.lookahead or a.lookahead_race
-    pilot = Lookahead(policy, cfg, racing() if a.lookahead_race else None) if a.lookahead else None
+    config = racing() if a.lookahead_race else LookaheadConfig()
+    if a.keep_s is not None:
+        config = replace(config, keep_s=a.keep_s)
+    pilot = Lookahead(policy, cfg, config) if a.lookahead else None
     tracks = list(env.core.tracks)
     results: list[dict | None] = [None] * a.episodes
     crossings: list[list[float]] = [[] for _ in range(a.episodes)]  # angle at each gate passed
