@@ -13,10 +13,11 @@ wind. What the model misses shows each step as the measured velocity against the
 that difference, low-pass filtered, is added to every prediction as a world acceleration.
 
 Predictions of all drones and all candidates run as one batch; the candidates only for the drones
-whose own flight would crash. A clear prediction of the policy's own flight is kept and not made
-again while the drone keeps to it (position, velocity, next gate and the gates it knows, each within
-a tolerance) for up to ``keep_s``; that prediction runs ``keep_s`` further ahead, so the filter
-still sees ``horizon_s`` ahead at every step. One prediction then covers several control steps, which is what makes the filter cheap enough for a single drone in real time.
+whose own flight would crash. A clear prediction of the policy's own flight is kept, not made
+again, for up to ``keep_s`` while the drone keeps to it (position, velocity, next gate and the gates
+it knows, each within a tolerance) and the rest of it has room to spare; that prediction runs
+``keep_s`` further ahead, so the filter still sees ``horizon_s`` ahead at every step. One
+prediction then covers several control steps (measured in docs/policy.md).
 
 In its racing mode (``racing()``, `--lookahead-race`) the filter also improves on a flight that
 stays clear: it tries the policy's action with the pitch rate offset by ±0.25 and ±0.5 for 0.2 s and
@@ -330,7 +331,7 @@ class Lookahead:
             crash step (n, K) (``steps`` where none), gates passed (n, K), reward sum (n, K),
             the first actions (n, K, 4), and with ``record`` the flight of the first offset:
             ``pos``, ``vel`` (n, steps, 3) and ``target`` (n, steps) after each step (NaN and -1
-            after it ended), and ``room`` (n, steps): the least clearance from frames, ground and
+            where the prediction stopped early: every flight ended), and ``room`` (n, steps): the least clearance from frames, ground and
             bounds over that step and all later ones, metres (None without ``record``).
         """
         steps = steps or self.horizon
