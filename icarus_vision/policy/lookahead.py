@@ -71,9 +71,9 @@ class LookaheadConfig:
     """How long a clear prediction of the policy's own flight is trusted at most, without
     predicting again, while the drone keeps to it. That prediction runs ``horizon_s + keep_s``
     ahead, so a kept one still covers ``horizon_s``. 0: predict every step (as racing mode does)."""
-    keep_pos_m: float = 0.05
+    keep_pos_m: float = 0.03
     """How far the drone may be from where the kept prediction put it."""
-    keep_vel_mps: float = 0.3
+    keep_vel_mps: float = 0.15
     """How far its velocity may be from the kept prediction's."""
     keep_gate_m: float = 0.05
     """How far any gate it knows may have moved since the prediction (gates known from vision)."""
