@@ -52,7 +52,8 @@ def race_cmd(
         "--lookahead/--no-lookahead",
         help="Fly the policy through the look-ahead safety filter: each step the next 0.6 s are "
         "predicted in the nominal quadrotor model, on the gates as vision knows them, and where "
-        "the policy's own flight would crash the clearest of 40 corrected actions is flown instead "
+        "the policy's own flight would crash the clearest of 40 corrected actions is flown instead; "
+        "a clear prediction is kept while the flight keeps to it. About halves the real-time factor "
         "(the report's policy reads NAME+lookahead).",
     ),
     lookahead_race: bool = typer.Option(
