@@ -143,13 +143,18 @@ def _clearance(model: RaceCore, rows: np.ndarray, trails: np.ndarray) -> np.ndar
     ground and the bounds, metres (inf after a flight ended: NaN positions)."""
     n, t, sub, _ = trails.shape
     pts = trails.reshape(n, t * sub, 1, 3)
-    local = rules.to_gate_frame(pts, model.g_pos[rows][:, None], model.g_yaw[rows][:, None])
-    bars = rules.bar_distance_local(local, model.g_size[rows][:, None], model.g_fw[rows][:, None])
+    bars = rules.gate_bar_distance(
+        pts, *(a[rows][:, None] for a in (model.g_pos, model.g_yaw, model.g_size, model.g_fw))
+    )
     bars = np.where(model.g_mask[rows][:, None], bars, np.inf).min(axis=2)
     p = pts[:, :, 0]
     box = np.minimum(p - model.bounds_lo[rows][:, None], model.bounds_hi[rows][:, None] - p)
     room = np.minimum(np.minimum(bars, p[..., 2]) - model.params.radius, box.min(axis=2))
     return np.nan_to_num(room, nan=np.inf).reshape(n, t, sub).min(axis=2)
+
+
+_NOT_KEPT = np.iinfo(np.int64).max // 2
+"""The age of a drone's plan when it has none to keep."""
 
 
 class Lookahead:
@@ -262,7 +267,7 @@ class Lookahead:
     def _kept(self, core: RaceCore, state, idx: np.ndarray) -> np.ndarray:
         """(len(idx),) bool: drones whose kept clear prediction still holds (counts a step)."""
         plan, c = self._plan, self.config
-        if plan is None or plan["age"].shape[0] != core.n:
+        if not self._plan_fits(core):
             return np.zeros(idx.size, dtype=bool)
         age = plan["age"][idx] + 1
         j = np.minimum(age, self.keep_steps) - 1  # the predicted step the drone is at now
@@ -279,22 +284,23 @@ class Lookahead:
         plan["age"][idx[ok]] = age[ok]
         return ok
 
+    def _plan_fits(self, core: RaceCore) -> bool:
+        """Whether the kept plans are for a race of ``core``'s drones and gates."""
+        plan = self._plan
+        return plan is not None and plan["gates"].shape == core.g_pos.shape
+
     def _keep(self, core: RaceCore, idx: np.ndarray, clear: np.ndarray, path: dict) -> None:
         """Keep the new predictions of drones ``idx`` (only the clear ones can be kept)."""
         plan = self._plan
-        if (
-            plan is None
-            or plan["age"].shape[0] != core.n
-            or plan["gates"].shape != core.g_pos.shape
-        ):
+        if not self._plan_fits(core):
             h = self.horizon + self.keep_steps
             plan = self._plan = {
-                "age": np.full(core.n, np.iinfo(np.int64).max // 2), "t": np.zeros(core.n),
+                "age": np.full(core.n, _NOT_KEPT), "t": np.zeros(core.n),
                 "target": np.zeros((core.n, h), np.int64), "pos": np.zeros((core.n, h, 3)),
                 "vel": np.zeros((core.n, h, 3)), "gates": np.zeros(core.g_pos.shape),
                 "room": np.zeros((core.n, h)),
             }  # fmt: skip
-        plan["age"][idx] = np.where(clear, 0, np.iinfo(np.int64).max // 2)
+        plan["age"][idx] = np.where(clear, 0, _NOT_KEPT)
         plan["t"][idx] = core.t[idx]
         plan["gates"][idx] = core.g_pos[idx]
         for name in ("target", "pos", "vel", "room"):
@@ -331,8 +337,9 @@ class Lookahead:
             crash step (n, K) (``steps`` where none), gates passed (n, K), reward sum (n, K),
             the first actions (n, K, 4), and with ``record`` the flight of the first offset:
             ``pos``, ``vel`` (n, steps, 3) and ``target`` (n, steps) after each step (NaN and -1
-            where the prediction stopped early: every flight ended), and ``room`` (n, steps): the least clearance from frames, ground and
-            bounds over that step and all later ones, metres (None without ``record``).
+            where the prediction stopped early: every flight ended), and ``room`` (n, steps): the
+            least clearance from frames, ground and bounds over that step and all later ones,
+            metres (None without ``record``).
         """
         steps = steps or self.horizon
         k = len(offsets)

@@ -244,3 +244,18 @@ def test_evaluate_policy_flies_the_racing_mode():
     policy = resolve_policy("default")
     r = evaluate_policy(policy, episodes=2, num_gates=3, difficulty=0.5, seed=1, lookahead=racing())
     assert r["lookahead"] is True and r["lookahead_race"] is True
+
+
+def test_a_filter_flies_on_into_a_race_with_other_gates():
+    """Kept plans of one race are dropped, not compared, when the next has another gate count."""
+    env, obs, pilot = hovering(3.0)
+    filt = Lookahead(pilot, env.config)
+    fly(env, filt, obs, 2)
+    other = BatchedRacingVecEnv(1, EnvConfig(track="three-gates"))
+    other.seed(0)
+    other.reset()
+    other.state.pos[0, 2] = 3.0
+    other.core.taken_off[:] = True
+    assert other.core.g_pos.shape != env.core.g_pos.shape
+    filt.act(other.core, other.state, other.core.observe(other.state))
+    assert filt.predictions == 2
