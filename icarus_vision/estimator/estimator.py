@@ -351,13 +351,17 @@ class GateEstimator:
         # Only a gate that vision has confirmed less often than it has contradicted it lately,
         # though the map puts it in view, is moved: a persistent false detection next to a gate
         # that is being measured well, or next to one the camera cannot see (just flown through,
-        # behind or beside the drone), stays an outlier.
+        # behind or beside the drone), stays an outlier. Nor is a gate of the map moved beyond
+        # ``map_limit_sigmas`` of where the map has it.
+        tr = self.tracks[ti]
+        beyond_map = self.config.map_limit_sigmas * self.config.map_sigma_m
         if (
             dists[ti] <= fc.reinit_radius_m
-            and len(agree) > fc.reinit_vote * self.tracks[ti].hits_since(t - fc.reinit_window_s)
-            and self._in_view(self.tracks[ti], r_wc, t_wc)
+            and not (tr.from_map and np.linalg.norm(m.pos - tr.anchor) > beyond_map)
+            and len(agree) > fc.reinit_vote * tr.hits_since(t - fc.reinit_window_s)
+            and self._in_view(tr, r_wc, t_wc)
         ):
-            self.tracks[ti].reinit(m, t)
+            tr.reinit(m, t)
             self.counts["reinit"] += 1
             self._rejected.clear()
 

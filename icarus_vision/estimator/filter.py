@@ -114,6 +114,7 @@ class GateTrack:
         hit_times: times of the last accepted measurements (at most ``RECENT_HITS``), s.
         created_t: time the track was created, s.
         from_map: initialised from the prior map (map-aided) rather than from vision.
+        anchor: (3,) where the track started: the map's place for a gate of the map.
     """
 
     def __init__(
@@ -133,6 +134,7 @@ class GateTrack:
         self.hit_times: deque[float] = deque(maxlen=RECENT_HITS)
         self.created_t = float(t)
         self.from_map = from_map
+        self.anchor = self.mean[:3].copy()
 
     @property
     def pos(self) -> np.ndarray:

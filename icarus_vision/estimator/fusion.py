@@ -230,7 +230,8 @@ def match_detections(
     Both PnP solutions are tried against every track of each gate size (Mahalanobis distance plus
     the solution's cost gap); a pair is allowed when its d² is within the χ² gate, the
     detection does not miss the track's projected direction (``bearing_chi2``) and its range is
-    within ``range_ratio`` of the track's (beyond twice the track's spread). Among the
+    within ``range_ratio`` of the track's (beyond twice the track's spread), and, for a gate of
+    the map, it stays within ``map_limit_sigmas`` of where the map put it. Among the
     allowed pairs the one-to-one assignment of lowest total score is taken (two gates stacked on
     one line of sight are seen together; each detection to the gate that explains it best, one
     at a time, would give both to one gate and leave the other unmeasured).
@@ -257,6 +258,9 @@ def match_detections(
     recent = np.array([t - tr.last_hit_t <= cfg.filter.confirmed_s for tr in tracks], bool)
     confirmed = recent & (track_range < cfg.filter.confirmed_within_m)
     track_spread = 2.0 * np.sqrt(np.trace(covs[:, :3, :3], axis1=1, axis2=2))
+    anchors = np.array([tr.anchor for tr in tracks]).reshape(-1, 3)
+    from_map = np.array([tr.from_map for tr in tracks], bool)  # map-free gates: no map to keep to
+    limit = np.where(from_map, cfg.map_limit_sigmas * cfg.map_sigma_m, np.inf)
     ratio = cfg.filter.range_ratio
     tight = cfg.filter.confirmed_range_ratio
     score = np.full((n_det, len(tracks)), np.inf)
@@ -273,6 +277,8 @@ def match_detections(
         off_range |= confirmed[idx] & (
             (seen > tight * track_range[idx]) | (seen * tight < track_range[idx])
         )
+        off_map = np.linalg.norm(m.z[:, :, None, :3] - anchors[idx], axis=-1) > limit[idx]
+        off_range |= off_map
         below_floor = (m.z[:, :, 2] < cfg.measurement.min_height_m)[..., None]
         top, d2, slot[:, idx], alt[:, idx] = _track_scores(
             m, gaps, means[idx], covs[idx], off_bearing[:, :, idx] | off_range | below_floor

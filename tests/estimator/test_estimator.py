@@ -55,6 +55,22 @@ def test_converges_from_a_wrong_prior(two_gates, offset):
         assert est.counts["reinit"] == 1
 
 
+def test_a_gate_of_the_map_stays_within_its_limit(two_gates):
+    """With ``map_limit_sigmas`` the map is trusted to within that many ``map_sigma_m``: a gate
+    the map has 1.5 m off is neither matched nor re-initialised beyond 0.6 m of the map's place
+    (without the limit it converges to the truth: above), while a gate 0.45 m off converges."""
+    for offset, converges in ((1.5, False), (0.3, True)):
+        moved = Gate((6.0 - offset, offset, 2.0 + offset / 2))
+        prior = Track("prior", (moved, two_gates.gates[1]))
+        est = GateEstimator(CAM, EstimatorConfig(map_sigma_m=0.3, map_limit_sigmas=2.0), prior)
+        oracle = OracleDetector(two_gates, CAM, sigma_px=0.5, seed=0)
+        last = _fly(est, oracle, 0.0, 1.0, 0.0, 1.5)[-1]
+        x = 1.5 * last.t
+        err = np.linalg.norm(last.rel_world - _truth_rel(two_gates.gates[0], x))
+        assert np.linalg.norm(est.tracks[0].pos - np.asarray(moved.pos)) <= 0.6 + 1e-9
+        assert (err < 0.05) == converges and est.counts["reinit"] == 0, (offset, err)
+
+
 def test_rejects_injected_outliers(two_gates):
     prior = displaced_map(two_gates, 0.2, 3.0, seed=1)
     est = GateEstimator(CAM, EstimatorConfig(), prior)

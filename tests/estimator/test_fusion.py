@@ -21,6 +21,7 @@ from icarus_vision.estimator.fusion import (
     solve_detections,
 )
 from icarus_vision.estimator.pnp import (
+    GateMeasurement,
     measure_candidates,
     measurement_covariance,
     pose_covariance,
@@ -262,3 +263,36 @@ def test_a_gate_below_the_floor_is_no_measurement():
         assert len(pairs) == matched and not unmatched
         far = [GateTrack(np.array([6.0, 5.0, 3.0]), 0.0, cov, 1.0, 0.0, True)]
         assert len(match_detections(sols, far, 1.0, r_wc, t_wc, cfg)[1]) == matched
+
+
+def test_a_gate_of_the_map_takes_no_read_beyond_its_limit():
+    """``map_limit_sigmas``: a read that would put a gate of the map 1.4 m from where the map has
+    it (another gate, an outer edge) is not that gate, however wide its covariance has grown; a
+    read 0.5 m off still is; a gate vision found (map-free) has no such limit."""
+    od = odom_at(1.0, [0.0, 0.0, 2.0])
+    r_wc, t_wc = CAM.pose(od.pos, od.quat)
+    wide = np.diag([2.0**2] * 3 + [math.radians(10.0) ** 2])
+
+    def matched(gate_at, track: GateTrack, limit: float) -> bool:
+        det = GateDetection(
+            CAM.project(np.asarray(Gate(gate_at).corners()), od.pos, od.quat)[0], np.ones(4), 1.0
+        )
+        sols, _ = solve_detections([det], CAM.K, SIZE, r_wc, t_wc, CFG, 1.0)
+        cfg = EstimatorConfig(measurement=CFG, map_limit_sigmas=limit)  # map_sigma_m 0.5: 1 m
+        return bool(match_detections(sols, [track], 1.0, r_wc, t_wc, cfg)[0])
+
+    mapped = GateTrack(np.array([6.0, 0.0, 2.0]), 0.0, wide, 1.0, 0.0, True)
+    assert matched((6.0, 1.4, 2.0), mapped, math.inf)
+    assert not matched((6.0, 1.4, 2.0), mapped, 2.0)
+    assert matched((6.0, 0.5, 2.1), mapped, 2.0)
+    found = GateTrack(np.array([6.0, 0.0, 2.0]), 0.0, wide, 1.0, 0.0, False)
+    assert matched((6.0, 1.4, 2.0), found, 2.0)
+    # the limit is kept around the map's place, not around the estimate
+    mapped.mean[:3] = (6.0, 1.0, 2.0)
+    assert not matched((6.0, 1.4, 2.0), mapped, 2.0)
+    mapped.reinit(GateMeasurement(np.array([6.0, 1.4, 2.0]), 0.0, wide, 6.0, 0.0), 1.0)
+    assert not matched((6.0, 1.6, 2.0), mapped, 2.0)
+    with pytest.raises(ValueError, match="map_limit_sigmas"):
+        EstimatorConfig(map_limit_sigmas=0.0)
+    cnn, opencv = config_for_detector("cnn"), config_for_detector("opencv")
+    assert cnn.map_limit_sigmas * cnn.map_sigma_m == 1.0 and opencv.map_limit_sigmas == math.inf
