@@ -190,11 +190,12 @@ class EstimatorConfig:
     drone flying through the gate. inf: off."""
     map_limit_sigmas: float = float("inf")
     """Map-aided: a detection that would put a gate more than this many ``map_sigma_m`` (as a
-    distance) from where the map has it is not that gate. Vision corrects a map within its error; a read of another gate, of a gate's
-    outer edge or of something gate-like, accepted frame after frame, drags a gate's estimate
-    metres away instead, the true reads then fall outside its χ² gate, and the drone counts a
-    passage through a gate it never flew through. Nor does the re-initialisation rule move a gate
-    beyond it: the map is trusted to within this. inf: off (``DETECTOR_MAP_LIMIT_SIGMAS``)."""
+    distance) from where the map has it is not that gate. Vision corrects a map within its
+    error; a read of another gate, of a gate's outer edge or of something gate-like, accepted
+    frame after frame, drags a gate's estimate metres away instead, the true reads then fall
+    outside its χ² gate, and the drone counts a passage through a gate it never flew through. Nor
+    does the re-initialisation rule move a gate beyond it: the map is trusted to within this.
+    inf: off (``DETECTOR_MAP_LIMIT_SIGMAS``)."""
     gate_size: float = 1.0
     """Map-free: side of the gates' square opening, m (map-aided takes each gate's own size)."""
     measurement: MeasurementConfig = field(default_factory=MeasurementConfig)

@@ -278,11 +278,9 @@ def match_detections(
             (seen > tight * track_range[idx]) | (seen * tight < track_range[idx])
         )
         off_map = np.linalg.norm(m.z[:, :, None, :3] - anchors[idx], axis=-1) > limit[idx]
-        off_range |= off_map
         below_floor = (m.z[:, :, 2] < cfg.measurement.min_height_m)[..., None]
-        top, d2, slot[:, idx], alt[:, idx] = _track_scores(
-            m, gaps, means[idx], covs[idx], off_bearing[:, :, idx] | off_range | below_floor
-        )
+        excluded = off_bearing[:, :, idx] | off_range | off_map | below_floor
+        top, d2, slot[:, idx], alt[:, idx] = _track_scores(m, gaps, means[idx], covs[idx], excluded)
         score[:, idx] = np.where(d2 <= cfg.filter.gate_chi2, top, np.inf)
     allowed = np.isfinite(score)
     pairs = []
