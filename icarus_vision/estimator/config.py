@@ -215,6 +215,11 @@ class EstimatorConfig:
         if not self.map_limit_sigmas > 0:
             raise ValueError(f"map_limit_sigmas must be > 0, got {self.map_limit_sigmas}")
 
+    @property
+    def map_limit_m(self) -> float:
+        """How far a gate of the map may be put from the map's place, m (``map_limit_sigmas``)."""
+        return self.map_limit_sigmas * self.map_sigma_m
+
 
 DETECTOR_PIXEL_SIGMA = {"cnn": 12.0, "opencv": 1.5}
 """Corner error (px, 1σ) the estimator assumes for each image detector. The CNN's errors are

@@ -354,10 +354,9 @@ class GateEstimator:
         # behind or beside the drone), stays an outlier. Nor is a gate of the map moved beyond
         # ``map_limit_sigmas`` of where the map has it.
         tr = self.tracks[ti]
-        beyond_map = self.config.map_limit_sigmas * self.config.map_sigma_m
         if (
             dists[ti] <= fc.reinit_radius_m
-            and not (tr.from_map and np.linalg.norm(m.pos - tr.anchor) > beyond_map)
+            and not (tr.from_map and np.linalg.norm(m.pos - tr.anchor) > self.config.map_limit_m)
             and len(agree) > fc.reinit_vote * tr.hits_since(t - fc.reinit_window_s)
             and self._in_view(tr, r_wc, t_wc)
         ):

@@ -260,7 +260,7 @@ def match_detections(
     track_spread = 2.0 * np.sqrt(np.trace(covs[:, :3, :3], axis1=1, axis2=2))
     anchors = np.array([tr.anchor for tr in tracks]).reshape(-1, 3)
     from_map = np.array([tr.from_map for tr in tracks], bool)  # map-free gates: no map to keep to
-    limit = np.where(from_map, cfg.map_limit_sigmas * cfg.map_sigma_m, np.inf)
+    limit = np.where(from_map, cfg.map_limit_m, np.inf)
     ratio = cfg.filter.range_ratio
     tight = cfg.filter.confirmed_range_ratio
     score = np.full((n_det, len(tracks)), np.inf)

@@ -295,4 +295,4 @@ def test_a_gate_of_the_map_takes_no_read_beyond_its_limit():
     with pytest.raises(ValueError, match="map_limit_sigmas"):
         EstimatorConfig(map_limit_sigmas=0.0)
     cnn, opencv = config_for_detector("cnn"), config_for_detector("opencv")
-    assert cnn.map_limit_sigmas * cnn.map_sigma_m == 1.0 and opencv.map_limit_sigmas == math.inf
+    assert cnn.map_limit_m == 1.0 and opencv.map_limit_m == math.inf
