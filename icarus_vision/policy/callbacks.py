@@ -173,6 +173,66 @@ class CriticWarmup(BaseCallback):
         return True
 
 
+class ScheduledRate:
+    """The learning rate :class:`Anneal` sets: a picklable stand-in for SB3's schedule, so a
+    checkpoint saves it."""
+
+    def __init__(self, value: float) -> None:
+        self.value = value
+
+    def __call__(self, _progress_remaining: float) -> float:
+        return self.value
+
+
+class Anneal(BaseCallback):
+    """Lowers the learning rate and the ceiling on the policy's log std linearly over the run.
+
+    ``fraction()`` says how much of the run is done (0 to 1; the larger of its steps and its wall
+    time where a time limit is set). Before each rollout and at the run's end the learning rate becomes ``lr0 + f (lr1
+    - lr0)`` and each action axis's log std at most ``start + f (std1 - start)``, ``start`` being
+    its value when the run began (``std_start``, kept in the checkpoint so a resumed run goes on
+    along the same line). ``lr1`` or ``std1`` None leaves that one alone.
+    """
+
+    def __init__(self, fraction, lr0: float, lr1: float | None, std1: float | None,
+                 std_start: list[float] | None = None) -> None:  # fmt: skip
+        super().__init__()
+        self.fraction = fraction
+        self.lr0, self.lr1, self.std1 = lr0, lr1, std1
+        self.std_start = std_start
+        self.rate = ScheduledRate(lr0)
+
+    def _on_training_start(self) -> None:
+        if self.std1 is not None and self.std_start is None:
+            self.std_start = self.model.policy.log_std.detach().cpu().tolist()
+        if self.lr1 is not None:
+            self.model.lr_schedule = self.rate
+        self._apply()
+
+    def _apply(self) -> None:
+        import torch
+
+        f = min(max(float(self.fraction()), 0.0), 1.0)
+        if self.lr1 is not None:
+            self.rate.value = self.lr0 + f * (self.lr1 - self.lr0)
+        if self.std1 is not None:
+            start = torch.as_tensor(self.std_start, dtype=torch.float32)
+            ceiling = start + f * (self.std1 - start)
+            log_std = self.model.policy.log_std
+            with torch.no_grad():
+                log_std.copy_(torch.minimum(log_std, ceiling.to(log_std.dtype)))
+            self.logger.record("train/log_std_ceiling", float(ceiling.max()))
+
+    def _on_rollout_start(self) -> None:
+        self._apply()
+
+    def _on_training_end(self) -> None:  # the saved model keeps to the ceiling too
+        self._apply()
+
+    def _on_step(self) -> bool:
+        return True
+
+
 class MetricsCallback(BaseCallback):
     """Keeps a wall-clock log of training (timesteps, success, return) for curves and the console."""
 

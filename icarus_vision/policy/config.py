@@ -33,7 +33,10 @@ class PPOConfig:
     n_epochs: int = 7
     """Passes over each rollout."""
     learning_rate: float = 1e-3
-    """Adam learning rate."""
+    """Adam learning rate (at the start of the run)."""
+    learning_rate_final: float | None = None
+    """Learning rate at the end of the run, reached linearly (None: constant). The run's end is
+    its timesteps, or its ``--max-minutes`` where that comes first."""
     gamma: float = 0.99
     """Discount factor."""
     gae_lambda: float = 0.95
@@ -50,6 +53,10 @@ class PPOConfig:
     """Hidden layers of the policy and value MLPs (separate networks)."""
     log_std_init: float = 0.0
     """Initial log standard deviation of the Gaussian policy."""
+    log_std_final: float | None = None
+    """Ceiling on the policy's log standard deviation, lowered linearly from where each action
+    axis starts to this by the run's end (as ``learning_rate_final``): exploration narrows as
+    the run ends (None: the log std is learned freely)."""
     advantage_norm: str = "minibatch"
     """"minibatch" (SB3's per-minibatch normalisation) or "running" (Welford statistics over all
     rollouts so far, applied to whole rollouts)."""
@@ -241,6 +248,11 @@ def validate_train_config(c: TrainConfig) -> None:
         ("ppo.batch_size", 1 <= p.batch_size <= p.num_envs * p.n_steps),
         ("ppo.n_epochs", p.n_epochs >= 1),
         ("ppo.learning_rate", 0 < p.learning_rate < 1),
+        (
+            "ppo.learning_rate_final",
+            p.learning_rate_final is None or 0 <= p.learning_rate_final < 1,
+        ),
+        ("ppo.log_std_final", p.log_std_final is None or -10 <= p.log_std_final <= 2),
         ("ppo.gamma", 0 < p.gamma <= 1),
         ("ppo.gae_lambda", 0 <= p.gae_lambda <= 1),
         ("ppo.clip_range", 0 < p.clip_range < 1),

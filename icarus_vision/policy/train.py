@@ -26,6 +26,7 @@ import numpy as np
 
 from icarus_vision.fileio import atomic_path, atomic_write_json
 from icarus_vision.policy.callbacks import (
+    Anneal,
     CriticWarmup,
     CurriculumCallback,
     MetricsCallback,
@@ -305,9 +306,19 @@ def train_policy(
     metrics.wall_offset = float(state.get("wall_s", 0.0))
     best = list(state["best"])
 
+    def fraction() -> float:  # how much of the run is done, for the schedules
+        f = model.num_timesteps / max(total, 1)
+        return f if max_wall_s is None else max(f, metrics.elapsed() / max_wall_s)
+
+    anneal = None
+    if p.learning_rate_final is not None or p.log_std_final is not None:
+        anneal = Anneal(fraction, p.learning_rate, p.learning_rate_final, p.log_std_final,
+                        state.get("log_std_start"))  # fmt: skip
+
     def snapshot() -> dict:
         return {"stage": curriculum.stage, "best": best, "wall_s": metrics.elapsed(), "metrics": metrics.rows,
-                "timesteps": int(model.num_timesteps)}  # fmt: skip
+                "timesteps": int(model.num_timesteps),
+                **({} if anneal is None or anneal.std_start is None else {"log_std_start": anneal.std_start})}  # fmt: skip
 
     class Periodic(BaseCallback):
         def __init__(self) -> None:
@@ -363,6 +374,8 @@ def train_policy(
         callbacks.append(CriticWarmup(cfg.init_critic_steps))
     if p.advantage_norm == "running":
         callbacks.append(RunningAdvantageNorm())
+    if anneal is not None:
+        callbacks.append(anneal)
     callbacks += extra
     remaining = max(total - int(model.num_timesteps), 0) if resume else total
     try:

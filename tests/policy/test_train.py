@@ -182,6 +182,8 @@ def test_cli_resume_uses_the_runs_own_config(tmp_path):
         ({"ppo": {"net_arch": [64, "x"]}}, "net_arch"),
         ({"curriculum": {"stages": 5}}, "stages"),
         ({"reward": 3}, "reward: must be a non-empty string"),
+        ({"ppo": {"learning_rate_final": -1e-4}}, "learning_rate_final"),
+        ({"ppo": {"log_std_final": 5.0}}, "log_std_final"),
     ],
 )
 def test_config_values_of_the_wrong_type_or_range_are_refused(table, match):
@@ -205,3 +207,46 @@ def test_every_evaluated_policy_is_exported_with_its_evaluation(tmp_path):
     chosen = out / "evaluated" / f"{best['timesteps']:09d}.safetensors"
     assert chosen.read_bytes() == (out / "best.safetensors").read_bytes()
     assert load_policy(chosen).obs_dim == load_policy(out / "best").obs_dim
+
+
+def test_the_schedules_lower_the_learning_rate_and_the_log_std_and_survive_a_resume(tmp_path):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    ppo = replace(TINY.ppo, learning_rate=1e-3, learning_rate_final=1e-4, log_std_init=0.0,
+                  log_std_final=-2.0)  # fmt: skip
+    cfg = replace(TINY, ppo=ppo)
+    out = tmp_path / "run"
+    seen = []  # (learning rate, largest log std) as each rollout begins
+
+    class Seen(BaseCallback):
+        def _on_rollout_start(self) -> None:
+            seen.append((self.model.lr_schedule(1.0), self.model.policy.log_std.max().item()))
+
+        def _on_step(self) -> bool:
+            return True
+
+    train_policy(cfg, out, seed=0, timesteps=8192, verbose=0, callbacks=lambda c, e: [Seen()])
+    assert seen[0] == (pytest.approx(1e-3), pytest.approx(0.0))
+    assert seen[1][0] == pytest.approx(1e-3 + 0.5 * (1e-4 - 1e-3))  # 4096 of 8192 steps done
+    assert seen[1][1] <= -1.0 + 1e-6
+    state = json.loads((out / "checkpoints" / "last_state.json").read_text())
+    assert state["log_std_start"] == [0.0] * 4  # where each axis started
+    model = PPO.load(out / "checkpoints" / "last.zip", device="cpu")
+    assert model.policy.log_std.max().item() <= -2.0 + 1e-6  # the run's end: the final ceiling
+    # resumed for twice the steps: halfway again when it goes on, the final rate at 3/4 + 1/4
+    seen.clear()
+    train_policy(cfg, out, seed=0, resume=True, timesteps=16384, verbose=0,
+                 callbacks=lambda c, e: [Seen()])  # fmt: skip
+    assert [lr for lr, _ in seen] == pytest.approx([5.5e-4, 3.25e-4])
+    state = json.loads((out / "checkpoints" / "last_state.json").read_text())
+    assert state["log_std_start"] == [0.0] * 4  # kept, not taken again from the resumed model
+    model = PPO.load(out / "checkpoints" / "last.zip", device="cpu")
+    assert model.policy.log_std.max().item() <= -2.0 + 1e-6
+
+
+def test_without_schedules_the_learning_rate_stays_and_nothing_is_recorded(tmp_path):
+    out = tmp_path / "run"
+    train_policy(TINY, out, seed=0, timesteps=8192, verbose=0)
+    assert "log_std_start" not in json.loads((out / "checkpoints" / "last_state.json").read_text())
+    model = PPO.load(out / "checkpoints" / "last.zip", device="cpu")
+    assert model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(1e-3)
