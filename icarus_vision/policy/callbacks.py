@@ -174,8 +174,8 @@ class CriticWarmup(BaseCallback):
 
 
 class ScheduledRate:
-    """The learning rate :class:`Anneal` sets: a picklable stand-in for SB3's schedule, so a
-    checkpoint saves it."""
+    """The learning rate :class:`Anneal` sets, as SB3's schedule: an object SB3 can pickle into
+    each checkpoint (a bound method of the callback cannot be)."""
 
     def __init__(self, value: float) -> None:
         self.value = value
@@ -188,10 +188,10 @@ class Anneal(BaseCallback):
     """Lowers the learning rate and the ceiling on the policy's log std linearly over the run.
 
     ``fraction()`` says how much of the run is done (0 to 1; the larger of its steps and its wall
-    time where a time limit is set). Before each rollout and at the run's end the learning rate becomes ``lr0 + f (lr1
-    - lr0)`` and each action axis's log std at most ``start + f (std1 - start)``, ``start`` being
-    its value when the run began (``std_start``, kept in the checkpoint so a resumed run goes on
-    along the same line). ``lr1`` or ``std1`` None leaves that one alone.
+    time where a time limit is set). Before each rollout and at the run's end the learning rate
+    becomes ``lr0 + f (lr1 - lr0)`` and each action axis's log std at most ``start + f (std1 -
+    start)``, ``start`` being its value when the run began (``std_start``, kept in the checkpoint
+    so a resumed run goes on along the same line). ``lr1`` or ``std1`` None leaves that one alone.
     """
 
     def __init__(self, fraction, lr0: float, lr1: float | None, std1: float | None,
