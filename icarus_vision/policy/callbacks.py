@@ -207,7 +207,6 @@ class Anneal(BaseCallback):
             self.std_start = self.model.policy.log_std.detach().cpu().tolist()
         if self.lr1 is not None:
             self.model.lr_schedule = self.rate
-        self._apply()
 
     def _apply(self) -> None:
         import torch

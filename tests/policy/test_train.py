@@ -233,7 +233,7 @@ def test_the_schedules_lower_the_learning_rate_and_the_log_std_and_survive_a_res
     assert state["log_std_start"] == [0.0] * 4  # where each axis started
     model = PPO.load(out / "checkpoints" / "last.zip", device="cpu")
     assert model.policy.log_std.max().item() <= -2.0 + 1e-6  # the run's end: the final ceiling
-    # resumed for twice the steps: halfway again when it goes on, the final rate at 3/4 + 1/4
+    # resumed for twice the steps: halfway as it goes on, three quarters at its next rollout
     seen.clear()
     train_policy(cfg, out, seed=0, resume=True, timesteps=16384, verbose=0,
                  callbacks=lambda c, e: [Seen()])  # fmt: skip
