@@ -77,6 +77,12 @@ class PlanResult:
         """(K + 1,) speed, m/s."""
         return np.linalg.norm(self.vel, axis=1)
 
+    def passage_paths(self) -> list[np.ndarray]:
+        """The planned path to each passage: element k (M + 1, 3) the node positions from passage
+        k − 1 (or the start) to passage k, for a ``path`` reward (``RaceCore.set_reference``)."""
+        ends = [0, *(int(k) for k in self.gate_nodes)]
+        return [self.pos[a : b + 1].copy() for a, b in zip(ends[:-1], ends[1:], strict=True)]
+
     @property
     def ratio_to_point_mass(self) -> float:
         """time_optimal_s / point_mass_s (>= 1 up to discretisation)."""

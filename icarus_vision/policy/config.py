@@ -17,7 +17,7 @@ from icarus_vision.sim.config import (
 from icarus_vision.sim.observation import OBS_DIMS
 from icarus_vision.validation import check_table, require_table
 
-REWARD_PRESETS = ("progress", "racing", "racing-line")
+REWARD_PRESETS = ("progress", "racing", "racing-line", "plan-line")
 
 
 @dataclass(frozen=True)
@@ -158,8 +158,11 @@ class TrainConfig:
     """Perception noise on the gate observation."""
     reward: str = "progress"
     """"progress" (the simulation core's reward), "racing" (adds speed toward the gate and a
-    time penalty) or "racing-line" (progress along the segment between gates, small smoothness
-    and perception costs; ``sim.config.RACING_LINE_REWARD``)."""
+    time penalty), "racing-line" (progress along the segment between gates, small smoothness
+    and perception costs; ``sim.config.RACING_LINE_REWARD``) or "plan-line" (racing-line with the
+    progress measured along the fixed ``track``'s time-optimal plan instead of the straight
+    segments, so a line wider than the plan's pays later; the plan is solved and cached under
+    ``runs/plans`` when missing)."""
     time_cost: float = 0.0
     """Cost per second of flight added to the reward preset's (≥ 0; e.g. 2.0 makes every second
     cost as much as 2 m of progress), so a policy values lap time beyond the discount."""
@@ -223,6 +226,8 @@ class TrainConfig:
             base = PROGRESS_REWARD
         elif self.reward == "racing-line":
             base = RACING_LINE_REWARD
+        elif self.reward == "plan-line":
+            base = replace(RACING_LINE_REWARD, line=0.0, path=1.0)
         else:
             base = RewardConfig(speed=0.5, time=-1.0)
         if self.time_cost:
@@ -312,6 +317,8 @@ def validate_train_config(c: TrainConfig) -> None:
     for name, ok in checks:
         if not ok:
             raise ValueError(f"train config: {name} is out of range ({_get(c, name)!r})")
+    if c.reward == "plan-line" and c.track is None:
+        raise ValueError("train config: reward 'plan-line' needs a fixed track (set track)")
     for sub in (c.ppo, c.randomization, c.perception):
         for f in fields(sub):
             v = getattr(sub, f.name)

@@ -141,10 +141,12 @@ def time_optimal_fields(
 
 
 def _episode(info: dict, speeds: list[float]) -> dict:
+    # A finished episode's time is its last passage's (within the step); another's, where it ended.
+    end = info["time"] if info["finish_time"] is None else info["finish_time"]
     return {
         "success": episode_success(info), "crashed": bool(info["crashed"]),
         "crash_reason": info["crash_reason"], "gates_passed": info["gates_passed"],
-        "lap_time": info["time"], "max_speed": max(speeds), "mean_speed": float(np.mean(speeds)),
+        "lap_time": end, "max_speed": max(speeds), "mean_speed": float(np.mean(speeds)),
     }  # fmt: skip
 
 

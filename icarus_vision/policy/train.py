@@ -47,6 +47,7 @@ from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVec
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
 from icarus_vision.sim.quad import QuadParams, load_quad
+from icarus_vision.sim.track import Track
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
 
@@ -121,6 +122,8 @@ def make_train_env(
         max_episode_s=cfg.max_episode_s,
     )
     venv = BatchedRacingVecEnv(num_envs, env_cfg)
+    if env_cfg.reward.path:
+        venv.core.set_reference(plan_reference(track, env_cfg.quad))
     venv.seed(seed)
     if cfg.perception.enabled:
         camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
@@ -133,6 +136,19 @@ def make_train_env(
     features = features or run_features(cfg)
     venv = FeatureVecEnv(venv, features)
     return PrivilegedVecEnv(venv, features) if cfg.privileged_critic else venv
+
+
+def plan_reference(track: Track, quad: QuadParams) -> list[np.ndarray]:
+    """The time-optimal plan's path to each passage of ``track`` (the ``plan-line`` reward's
+    reference): the cached plan of (track, quad), solved and cached first when missing."""
+    from icarus_vision.planning.cache import DEFAULT_CACHE_DIR, load_cached
+    from icarus_vision.planning.command import run_plan
+
+    plan = load_cached(track, quad, DEFAULT_CACHE_DIR)
+    if plan is None:
+        run_plan(track, quad)
+        plan = load_cached(track, quad, DEFAULT_CACHE_DIR)
+    return plan.passage_paths()
 
 
 LAP_WEIGHT = 0.1

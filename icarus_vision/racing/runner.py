@@ -219,7 +219,7 @@ def run_race(
         "finished": finished, "crashed": bool(info["crashed"]), "crash_reason": info["crash_reason"],
         "gates_total": info["gates_total"], "gates_passed": info["gates_passed"],
         "lap_times_s": [round(x, 4) for x in info["lap_times"]],
-        "total_time_s": round(info["time"], 4) if finished else None,
+        "total_time_s": round(info["finish_time"], 4) if finished else None,
         "max_speed_mps": round(float(speeds.max()), 3),
         "mean_speed_mps": round(float(speeds.mean()), 3),
         "sim_time_s": round(info["time"], 4), "wall_time_s": round(wall, 4),
@@ -231,7 +231,7 @@ def run_race(
     if optimal is not None:
         report["time_optimal_s"] = round(optimal, 4)
         if finished:
-            report["time_optimal_ratio"] = round(info["time"] / optimal, 4)
+            report["time_optimal_ratio"] = round(info["finish_time"] / optimal, 4)
     validate_report(report)
     pos = np.array([np.asarray(flown.start_pos), *rec.pos])
     t = np.array([0.0, *rec.t])

@@ -29,6 +29,11 @@ class RewardConfig:
     """Per metre flown along the racing line: the segment from the previous gate (or the start) to
     the next gate (Song et al. 2021); where that segment is shorter than 1 m (a gate flown straight
     back), toward the gate instead."""
+    path: float = 0.0
+    """Per metre flown along a reference path, such as a fixed track's time-optimal plan: from the
+    previous passage (or the start) to the next, the position's nearest point on it
+    (``RaceCore.set_reference``; the ``plan-line`` preset), so a wider line than the plan's earns
+    its metres later."""
     perception: float = 0.0
     """Per radian, every step, that the next gate lies outside a cone of ``perception_cone_deg``
     around the camera's optical axis (a negative value keeps the gate in view)."""

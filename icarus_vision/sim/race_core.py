@@ -31,6 +31,7 @@ from icarus_vision.sim.reward import (
     compute_reward,
     cost_action_change,
     reward_line,
+    reward_path,
 )
 from icarus_vision.sim.track import Track
 
@@ -68,6 +69,7 @@ class RaceCore:
         self.taken_off = np.zeros(n, dtype=bool)
         self.lap_start = np.zeros(n)
         self.last_lap_time = np.full(n, np.nan)
+        self.finish_t = np.full(n, np.nan)  # when the last passage was made (NaN until then)
         self.gates_per_lap = np.ones(n, dtype=np.int64)
         self.wind_const = np.zeros((n, 3))
         self.gust_amp = np.zeros((n, 3, 3))
@@ -82,6 +84,8 @@ class RaceCore:
         self.ep_difficulty = np.full(n, np.nan)  # layout difficulty of each drone's episode
         self.prev_action = np.full((n, 4), np.nan)
         self.crashes: list[dict] = []  # moments before crashes, for ``cfg.crash_replay``
+        self.ref_path: np.ndarray | None = None  # (P, M + 1, 3): ``set_reference``
+        self.ref_arc: np.ndarray | None = None  # (P, M + 1) arc length along each
         self._snap_every = max(1, round(SNAPSHOT_S * cfg.ctrl_hz))
         if cfg.crash_replay > 0:
             self.snaps = {
@@ -134,6 +138,28 @@ class RaceCore:
                 getattr(self, k)[:, :c] = old[k]
             for k in ("n_pass", "bounds_lo", "bounds_hi"):
                 setattr(self, k, old[k])
+
+    def set_reference(self, paths: list[np.ndarray]) -> None:
+        """The reference path of each passage for the ``path`` reward term: ``paths[k]`` (M_k + 1, 3)
+        runs from passage k − 1 (or the start) to passage k of the fixed track, e.g. the
+        time-optimal plan's nodes between them (``PlanResult.passage_paths``). Every drone flies
+        against the same reference; randomisation moves the gates, not it."""
+        if self.base_track is None:
+            raise ValueError("a reference path needs a fixed track (random tracks have none)")
+        if len(paths) != self.base_track.num_passages:
+            raise ValueError(
+                f"reference: {len(paths)} paths for {self.base_track.num_passages} passages"
+            )
+        paths = [np.asarray(q, dtype=np.float64) for q in paths]
+        if any(q.ndim != 2 or q.shape[1] != 3 or len(q) < 2 for q in paths):
+            raise ValueError("reference: each path needs two or more (x, y, z) points")
+        if not all(np.all(np.isfinite(q)) for q in paths):
+            raise ValueError("reference: paths must be finite")
+        m = max(len(q) for q in paths)
+        ref = np.stack([np.concatenate([q, np.repeat(q[-1:], m - len(q), axis=0)]) for q in paths])
+        self.ref_path = ref  # (P, M + 1, 3), padded with each path's last point
+        steps = np.linalg.norm(np.diff(ref, axis=1), axis=2)
+        self.ref_arc = np.concatenate([np.zeros((len(ref), 1)), np.cumsum(steps, axis=1)], axis=1)
 
     def set_difficulty(self, difficulty: float | None) -> None:
         """Race-layout difficulty of random tracks from the next reset on (curriculum hook).
@@ -234,6 +260,7 @@ class RaceCore:
         self.taken_off[idx] = False
         self.lap_start[idx] = 0.0
         self.last_lap_time[idx] = np.nan
+        self.finish_t[idx] = np.nan
         self.ep_return[idx] = 0.0
         for sums in self.ep_terms.values():
             sums[idx] = 0.0
@@ -388,7 +415,7 @@ class RaceCore:
         prev_dist = np.linalg.norm(gpos - p0, axis=1)
         to_gate = gpos - state.pos
         dist = np.linalg.norm(to_gate, axis=1)
-        passed, centrality = rules.gate_crossing(p0, state.pos, gpos, gyaw, gsize)
+        passed, centrality, fraction = rules.gate_crossing(p0, state.pos, gpos, gyaw, gsize)
         passed &= active
         pts = trail if trail is not None else state.pos[None]
         oob = rules.out_of_bounds(pts, self.bounds_lo, self.bounds_hi).any(axis=0)
@@ -403,6 +430,11 @@ class RaceCore:
             rows, j = np.arange(self.n), np.minimum(self.target, self.n_pass - 1)
             seg_from = np.where((j > 0)[:, None], self.g_pos[rows, j - 1], self.start_pos)
             extra["line"] = reward_line(p0, state.pos, seg_from, gpos)
+        if w.path:
+            if self.ref_path is None:
+                raise RuntimeError("the path reward needs a reference: RaceCore.set_reference")
+            j = np.minimum(self.target, self.n_pass - 1)
+            extra["path"] = reward_path(p0, state.pos, self.ref_path[j], self.ref_arc[j])
         if w.perception:
             uptilt = np.radians(cfg.quad.camera.uptilt_deg)
             extra["camera_angle"] = camera_gate_angle(quat_to_rot(state.quat), to_gate, uptilt)
@@ -421,17 +453,19 @@ class RaceCore:
             w, prev_dist=prev_dist, dist=dist, passed=passed, crashed=crashed,
             rpy=rpy, vel=state.vel, to_gate=to_gate, dt=dt, **extra,
         )  # fmt: skip
+        crossed_at = self.t + fraction * dt  # a passage's time: where in the step it was made
         self.t += dt
         self.target += passed
         lap_done = passed & (self.target % self.gates_per_lap == 0)
         if lap_done.any():
             for i in np.flatnonzero(lap_done):
-                lap = float(self.t[i] - self.lap_start[i])
+                lap = float(crossed_at[i] - self.lap_start[i])
                 self.lap_times[i].append(lap)
                 self.n_laps[i] += 1
                 self.last_lap_time[i] = lap
-                self.lap_start[i] = self.t[i]
+                self.lap_start[i] = crossed_at[i]
         all_passed = self.target >= self.n_pass
+        self.finish_t = np.where(passed & all_passed, crossed_at, self.finish_t)
         terminated = crashed | all_passed
         truncated = (self.t >= self.max_t - 1e-9) & ~terminated
         if self.cfg.layout_replay > 0 and self.base_track is None:
@@ -480,6 +514,7 @@ class RaceCore:
             "lap_time": None if np.isnan(self.last_lap_time[i]) else float(self.last_lap_time[i]),
             "lap_times": list(self.lap_times[i]),
             "time": float(self.t[i]),
+            "finish_time": None if np.isnan(self.finish_t[i]) else float(self.finish_t[i]),
             "difficulty": None if np.isnan(self.ep_difficulty[i]) else float(self.ep_difficulty[i]),
             "replayed": bool(self.replayed[i]),
             "reward_terms": {k: float(v[i]) for k, v in terms.items()},

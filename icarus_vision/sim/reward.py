@@ -61,6 +61,32 @@ def reward_line(
     return np.where(length >= 1.0, s1 - s0, toward)
 
 
+def path_position(p: np.ndarray, path: np.ndarray, arc: np.ndarray) -> np.ndarray:
+    """(N,) how far along each drone's reference path its position lies, metres.
+
+    Args:
+        p: (N, 3) positions.
+        path: (N, M + 1, 3) each drone's polyline (repeated points allowed).
+        arc: (N, M + 1) arc length at each of its points, from 0.
+
+    The position's nearest point on the polyline (each piece's projection clamped to the piece),
+    and the arc length there: 0 before the path's start, its length beyond its end.
+    """
+    a, d = path[:, :-1], np.diff(path, axis=1)  # (N, M, 3) piece starts and directions
+    dd = np.maximum(np.einsum("nmk,nmk->nm", d, d), 1e-12)
+    u = np.clip(np.einsum("nmk,nmk->nm", p[:, None] - a, d) / dd, 0.0, 1.0)
+    near = a + u[..., None] * d
+    best = np.argmin(np.einsum("nmk,nmk->nm", p[:, None] - near, p[:, None] - near), axis=1)
+    rows = np.arange(len(p))
+    return arc[rows, best] + u[rows, best] * (arc[rows, best + 1] - arc[rows, best])
+
+
+def reward_path(p0: np.ndarray, p1: np.ndarray, path: np.ndarray, arc: np.ndarray) -> np.ndarray:
+    """(N,) metres gained along each drone's reference path this step (``path_position`` after
+    minus before): a wide line earns the same metres in more steps, a tight one sooner."""
+    return path_position(p1, path, arc) - path_position(p0, path, arc)
+
+
 def camera_gate_angle(rot: np.ndarray, to_gate: np.ndarray, uptilt_rad: float) -> np.ndarray:
     """(N,) angle between the camera's optical axis and the direction to the gate, radians.
 
@@ -104,6 +130,7 @@ def compute_reward(
     to_gate: np.ndarray,
     dt: float,
     line: np.ndarray | None = None,
+    path: np.ndarray | None = None,
     camera_angle: np.ndarray | None = None,
     omega: np.ndarray | None = None,
     action_change: np.ndarray | None = None,
@@ -113,7 +140,7 @@ def compute_reward(
     """Weighted sum of the named terms.
 
     The optional inputs are needed only when their term's weight is non-zero: ``line`` (N,) from
-    ``reward_line``, ``camera_angle`` (N,) from ``camera_gate_angle``, ``omega`` (N, 3) body rates,
+    ``reward_line``, ``path`` (N,) from ``reward_path``, ``camera_angle`` (N,) from ``camera_gate_angle``, ``omega`` (N, 3) body rates,
     ``action_change`` (N,) from ``cost_action_change``, ``centrality`` (N,) from
     ``rules.gate_crossing`` (0 where no gate was passed), ``alignment`` (N,) from
     ``rules.crossing_alignment`` (0 where no gate was passed).
@@ -135,6 +162,8 @@ def compute_reward(
         terms["time"] = np.full(dist.shape, cfg.time * dt)
     if cfg.line:
         terms["line"] = cfg.line * line
+    if cfg.path:
+        terms["path"] = cfg.path * path
     if cfg.perception:
         cone = np.radians(cfg.perception_cone_deg)
         terms["perception"] = cfg.perception * cost_perception(camera_angle, cone)

@@ -162,20 +162,23 @@ def gate_passage(p0: np.ndarray, p1: np.ndarray, gate_pos, gate_yaw, size) -> np
 
 def gate_crossing(
     p0: np.ndarray, p1: np.ndarray, gate_pos, gate_yaw, size
-) -> tuple[np.ndarray, np.ndarray]:
-    """Gate passages (see ``gate_passage``) and how central each one was.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gate passages (see ``gate_passage``), how central each one was, and when in the step.
 
     Returns:
         passed: (N,) bool.
         centrality: (N,) 1 − max(|y|, |z|) / (size / 2) at the crossing point: 1 through the
             centre, 0 at the opening's edge; 0 where no gate was passed.
+        fraction: (N,) where along the step p0 → p1 the gate plane was crossed, in [0, 1] (the
+            step taken as straight): the passage's time is the step's start + fraction × its
+            length, as a timing gate would read it; 1 where no gate was passed.
     """
     c, s = np.cos(gate_yaw), np.sin(gate_yaw)
     x0 = c * (p0[:, 0] - gate_pos[:, 0]) + s * (p0[:, 1] - gate_pos[:, 1])
     x1 = c * (p1[:, 0] - gate_pos[:, 0]) + s * (p1[:, 1] - gate_pos[:, 1])
     crossed = (x0 < 0.0) & (x1 >= 0.0)
     if not crossed.any():  # the common case: nobody reached a gate plane this step
-        return crossed, np.zeros(len(crossed))
+        return crossed, np.zeros(len(crossed)), np.ones(len(crossed))
     both = to_gate_frame(np.stack((p0, p1), axis=1), gate_pos[:, None], gate_yaw[:, None])
     l0, l1 = both[:, 0], both[:, 1]
     denom = np.where(crossed, l1[:, 0] - l0[:, 0], 1.0)
@@ -184,7 +187,7 @@ def gate_crossing(
     h = size / 2.0
     passed = crossed & (np.abs(hit[:, 0]) < h) & (np.abs(hit[:, 1]) < h)
     offset = np.maximum(np.abs(hit[:, 0]), np.abs(hit[:, 1])) / h
-    return passed, np.where(passed, 1.0 - offset, 0.0)
+    return passed, np.where(passed, 1.0 - offset, 0.0), np.where(passed, t, 1.0)
 
 
 def crossing_alignment(p0: np.ndarray, p1: np.ndarray, gate_yaw: np.ndarray) -> np.ndarray:

@@ -387,6 +387,30 @@ def test_crash_cost_and_center_reward_replace_the_presets_weights():
             config_from_dict({key: -1.0})
 
 
+def test_plan_line_measures_progress_along_the_tracks_plan(tmp_path, monkeypatch):
+    """The plan-line preset: racing-line with the path term for the line term; refused without a
+    fixed track; its training env solves and caches the track's plan and flies against it (the
+    reference runs from the start to the gate's plane)."""
+    r = replace(SPECIALIST, track="split-s", reward="plan-line").reward_config()
+    assert (r.line, r.path) == (0.0, 1.0)
+    assert replace(r, line=1.0, path=0.0) == SPECIALIST.reward_config()
+    with pytest.raises(ValueError, match="plan-line.*fixed track"):
+        config_from_dict({"reward": "plan-line"})
+    monkeypatch.chdir(tmp_path)  # the plan is cached under ./runs/plans
+    cfg = replace(SPECIALIST, track="single-gate", reward="plan-line")
+    env = make_train_env(cfg, num_envs=2, num_gates=1, seed=0)
+    assert list((tmp_path / "runs" / "plans").glob("single-gate-*.npz"))
+    base = env
+    while not hasattr(base, "core"):  # under the perception noise and feature wrappers
+        base = base.venv
+    (ref,) = base.core.ref_path
+    assert ref[0] == pytest.approx([0.0, 0.0, 0.2])  # single-gate's start
+    assert ref[-1][0] == pytest.approx(5.0) and abs(ref[-1][1]) < 0.5  # its gate's plane
+    assert base.core.ref_arc[0, -1] > 5.0
+    env.reset()
+    env.step(np.tile([0.8, 0.0, 0.0, 0.0], (2, 1)))  # the path term is computed, not refused
+
+
 @pytest.mark.parametrize(
     "path", sorted(Path(__file__).parents[2].joinpath("configs").glob("policy-*.toml")), ids=str
 )

@@ -12,7 +12,9 @@ from icarus_vision.sim.reward import (
     compute_reward,
     cost_action_change,
     cost_perception,
+    path_position,
     reward_line,
+    reward_path,
 )
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
@@ -168,3 +170,77 @@ def test_env_pays_the_center_term_on_a_gate_passage():
     _, _, done, infos = env.step(np.array([[0.0, 0.0, 0.0, 0.0]]))
     assert done[0] and infos[0]["all_gates_passed"]
     assert infos[0]["reward_terms"]["center"] == pytest.approx(5.0, abs=0.1)
+
+
+L_PATH = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 2.0, 0.0]])  # 2 m along x, 2 m along y
+L_ARC = np.array([0.0, 2.0, 4.0])
+
+
+def _on_l(points):
+    p = np.asarray(points, float)
+    n = len(p)
+    return path_position(p, np.tile(L_PATH, (n, 1, 1)), np.tile(L_ARC, (n, 1)))
+
+
+def test_path_position_is_the_arc_length_of_the_nearest_point():
+    """On the path, beside it, before its start and beyond its end (clamped to 0 and 4 m)."""
+    got = _on_l(
+        [[1.0, 0, 0], [2.0, 1.5, 0], [1.0, -0.5, 0.3], [2.4, 1.0, 0], [-1.0, 0, 0], [2, 3, 0]]
+    )
+    assert got == pytest.approx([1.0, 3.5, 1.0, 3.0, 0.0, 4.0])
+
+
+def test_path_reward_pays_the_metres_along_the_path_not_the_metres_flown():
+    """A step along the second leg earns its length; the same step across the path earns nothing;
+    back along it costs; a step beside the corner that cuts it earns the arc it skips."""
+    n = 4
+    p0 = np.array([[2.0, 0.5, 0], [2.5, 1.0, 0], [1.5, 0, 0], [1.5, -0.1, 0]])
+    p1 = np.array([[2.0, 1.0, 0], [1.5, 1.0, 0], [1.0, 0, 0], [2.1, 0.5, 0]])
+    got = reward_path(p0, p1, np.tile(L_PATH, (n, 1, 1)), np.tile(L_ARC, (n, 1)))
+    assert got == pytest.approx([0.5, 0.0, -0.5, 1.0])
+
+
+def _one_gate_env(reward, n=1):
+    from icarus_vision.sim.track import Gate, Track
+
+    track = Track(name="one", gates=(Gate((2.0, 0.0, 1.0)),), start_pos=(0.0, 0.0, 1.0))
+    env = BatchedRacingVecEnv(n, EnvConfig(track=track, reward=reward), info_mode="full")
+    env.seed(0)
+    env.reset()
+    return env
+
+
+def test_env_pays_the_path_term_along_its_reference():
+    """A straight reference to the gate: a step at 5 m/s toward it earns about 0.1 m; the term is
+    logged, and without a reference the core says what it needs."""
+    from dataclasses import replace
+
+    reward = replace(RACING_LINE_REWARD, line=0.0, path=1.0)
+    env = _one_gate_env(reward)
+    with pytest.raises(RuntimeError, match="set_reference"):
+        env.step(np.zeros((1, 4)))
+    env = _one_gate_env(reward)
+    env.core.set_reference([np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [2.0, 0.0, 1.0]])])
+    env.state.pos[0] = [0.5, 0.0, 1.0]
+    env.state.vel[0] = [5.0, 0.0, 0.0]
+    _, _, _, infos = env.step(np.zeros((1, 4)))
+    assert infos[0]["reward_terms"]["path"] == pytest.approx(0.1, abs=0.01)
+    assert "line" not in infos[0]["reward_terms"]
+
+
+@pytest.mark.parametrize(
+    "paths, match",
+    [
+        ([], "1 passages"),
+        ([np.zeros((1, 3))], "two or more"),
+        ([np.zeros((3, 2))], "two or more"),
+        ([np.array([[0, 0, 0], [np.nan, 0, 0]])], "finite"),
+    ],
+)
+def test_a_bad_reference_is_refused(paths, match):
+    env = _one_gate_env(RACING_LINE_REWARD)
+    with pytest.raises(ValueError, match=match):
+        env.core.set_reference(paths)
+    rnd = BatchedRacingVecEnv(1, EnvConfig(random_tracks=True, num_gates=2))
+    with pytest.raises(ValueError, match="fixed track"):
+        rnd.core.set_reference([np.zeros((2, 3))] * 2)

@@ -187,14 +187,25 @@ def test_frame_collision_threshold(radius_margin, hit):
     assert bool(got[0]) == hit
 
 
+def test_crossing_fraction_is_where_in_the_step_the_plane_was_crossed():
+    """A step 0.1 m short of a gate 30° turned and 0.3 m beyond it crosses at a quarter."""
+    yaw = np.radians(30.0)
+    normal = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    gate = np.array([[1.0, 2.0, 3.0]])
+    p0, p1 = gate - 0.1 * normal, gate + 0.3 * normal + [[0.0, 0.0, 0.05]]
+    passed, _, fraction = rules.gate_crossing(p0, p1, gate, np.array([yaw]), np.ones(1))
+    assert passed[0] and fraction[0] == pytest.approx(0.25)
+
+
 def test_crossing_centrality_falls_from_the_centre_to_the_edge():
     """1 through the centre, 1 − max(|y|, |z|) / half the opening elsewhere, 0 without a passage."""
     p0 = np.array([[4.9, 0, 2], [4.9, 0.25, 2.1], [4.9, 0.1, 2.45], [4.9, 0.6, 2], [4.0, 0, 2]])
     p1 = p0 + [0.2, 0, 0]
     gate = np.tile([5.0, 0, 2], (5, 1))
-    passed, central = rules.gate_crossing(p0, p1, gate, np.zeros(5), np.ones(5))
+    passed, central, fraction = rules.gate_crossing(p0, p1, gate, np.zeros(5), np.ones(5))
     assert passed.tolist() == [True, True, True, False, False]
     assert central == pytest.approx([1.0, 0.5, 0.1, 0.0, 0.0])
+    assert fraction == pytest.approx([0.5, 0.5, 0.5, 1.0, 1.0])  # 0.1 of a 0.2 m step; 1: none
     assert passed.tolist() == rules.gate_passage(p0, p1, gate, np.zeros(5), np.ones(5)).tolist()
 
 
