@@ -141,14 +141,9 @@ def make_train_env(
 def plan_reference(track: Track, quad: QuadParams) -> list[np.ndarray]:
     """The time-optimal plan's path to each passage of ``track`` (the ``plan-line`` reward's
     reference): the cached plan of (track, quad), solved and cached first when missing."""
-    from icarus_vision.planning.cache import DEFAULT_CACHE_DIR, load_cached
-    from icarus_vision.planning.command import run_plan
+    from icarus_vision.planning.planner import plan
 
-    plan = load_cached(track, quad, DEFAULT_CACHE_DIR)
-    if plan is None:
-        run_plan(track, quad)
-        plan = load_cached(track, quad, DEFAULT_CACHE_DIR)
-    return plan.passage_paths()
+    return plan(track, quad).passage_paths()
 
 
 LAP_WEIGHT = 0.1

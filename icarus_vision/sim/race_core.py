@@ -426,14 +426,14 @@ class RaceCore:
         rpy = self.last_rpy = quat_to_rpy(state.quat)
         w = cfg.reward
         extra = {}
+        j = np.minimum(self.target, self.n_pass - 1)  # each drone's target passage
         if w.line:
-            rows, j = np.arange(self.n), np.minimum(self.target, self.n_pass - 1)
+            rows = np.arange(self.n)
             seg_from = np.where((j > 0)[:, None], self.g_pos[rows, j - 1], self.start_pos)
             extra["line"] = reward_line(p0, state.pos, seg_from, gpos)
         if w.path:
             if self.ref_path is None:
                 raise RuntimeError("the path reward needs a reference: RaceCore.set_reference")
-            j = np.minimum(self.target, self.n_pass - 1)
             extra["path"] = reward_path(p0, state.pos, self.ref_path[j], self.ref_arc[j])
         if w.perception:
             uptilt = np.radians(cfg.quad.camera.uptilt_deg)
@@ -465,7 +465,8 @@ class RaceCore:
                 self.last_lap_time[i] = lap
                 self.lap_start[i] = crossed_at[i]
         all_passed = self.target >= self.n_pass
-        self.finish_t = np.where(passed & all_passed, crossed_at, self.finish_t)
+        finished = passed & all_passed
+        self.finish_t[finished] = crossed_at[finished]
         terminated = crashed | all_passed
         truncated = (self.t >= self.max_t - 1e-9) & ~terminated
         if self.cfg.layout_replay > 0 and self.base_track is None:

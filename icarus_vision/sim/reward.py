@@ -140,7 +140,8 @@ def compute_reward(
     """Weighted sum of the named terms.
 
     The optional inputs are needed only when their term's weight is non-zero: ``line`` (N,) from
-    ``reward_line``, ``path`` (N,) from ``reward_path``, ``camera_angle`` (N,) from ``camera_gate_angle``, ``omega`` (N, 3) body rates,
+    ``reward_line``, ``path`` (N,) from ``reward_path``, ``camera_angle`` (N,) from
+    ``camera_gate_angle``, ``omega`` (N, 3) body rates,
     ``action_change`` (N,) from ``cost_action_change``, ``centrality`` (N,) from
     ``rules.gate_crossing`` (0 where no gate was passed), ``alignment`` (N,) from
     ``rules.crossing_alignment`` (0 where no gate was passed).
