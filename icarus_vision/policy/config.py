@@ -94,6 +94,12 @@ class CurriculumConfig:
     earlier crash of the batch, on that episode's track with its parameters and wind
     (``EnvConfig.crash_replay``): more of the moments the policy fails at. Such episodes do not
     count towards promotion. 0: every episode from the start."""
+    plan_start: float = 0.0
+    """Specialists (a fixed ``track``): the chance that a training episode starts from a state of
+    the track's time-optimal plan, drawn uniformly along it between the passages, with the
+    plan's speed, attitude and rates (``EnvConfig.plan_start``; the plan is solved and cached
+    when missing), so the policy meets the plan's line without having to find it first. Such
+    episodes do not count towards promotion. 0: every episode from the start."""
 
 
 @dataclass(frozen=True)
@@ -274,6 +280,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("curriculum.min_episodes", 1 <= c.curriculum.min_episodes),
         ("curriculum.layout_replay", 0 <= c.curriculum.layout_replay < 1),
         ("curriculum.crash_replay", 0 <= c.curriculum.crash_replay < 1),
+        ("curriculum.plan_start", 0 <= c.curriculum.plan_start < 1),
         (
             "curriculum.difficulty",
             c.curriculum.difficulty is None
@@ -319,6 +326,8 @@ def validate_train_config(c: TrainConfig) -> None:
             raise ValueError(f"train config: {name} is out of range ({_get(c, name)!r})")
     if c.reward == "plan-line" and c.track is None:
         raise ValueError("train config: reward 'plan-line' needs a fixed track (set track)")
+    if c.curriculum.plan_start > 0 and c.track is None:
+        raise ValueError("train config: curriculum.plan_start needs a fixed track (set track)")
     for sub in (c.ppo, c.randomization, c.perception):
         for f in fields(sub):
             v = getattr(sub, f.name)

@@ -47,7 +47,6 @@ from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVec
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
 from icarus_vision.sim.quad import QuadParams, load_quad
-from icarus_vision.sim.track import Track
 from icarus_vision.sim.vec_env import BatchedRacingVecEnv
 
 
@@ -97,6 +96,7 @@ def make_train_env(
     layout_replay: float = 0.0,
     quad: QuadParams | None = None,
     crash_replay: float = 0.0,
+    plan_start: float = 0.0,
 ):
     """The training VecEnv stack: batched drones -> perception noise -> policy features
     (-> the privileged critic's block, with ``cfg.privileged_critic``).
@@ -105,7 +105,8 @@ def make_train_env(
     config's fixed ``track``; ``features``: the transform (None: ``run_features(cfg)``);
     ``layout_replay``: the chance an episode re-flies a failed layout (training only); ``quad``:
     the config's quadrotor when already loaded (None: ``train_quad(cfg)`` reads it);
-    ``crash_replay``: the chance an episode starts shortly before an earlier crash (training only).
+    ``crash_replay``: the chance an episode starts shortly before an earlier crash, ``plan_start``
+    one from a state of the fixed track's time-optimal plan (both training only).
     """
     track = None if cfg.track is None else resolve_track(cfg.track)
     env_cfg = EnvConfig(
@@ -116,14 +117,21 @@ def make_train_env(
         layout_difficulty=difficulty if track is None else None,
         layout_replay=layout_replay if track is None else 0.0,
         crash_replay=crash_replay,
+        plan_start=plan_start,
         randomization=cfg.randomization,
         reward=cfg.reward_config(),
         observation=cfg.observation,
         max_episode_s=cfg.max_episode_s,
     )
     venv = BatchedRacingVecEnv(num_envs, env_cfg)
-    if env_cfg.reward.path:
-        venv.core.set_reference(plan_reference(track, env_cfg.quad))
+    if env_cfg.reward.path or plan_start > 0:
+        from icarus_vision.planning.planner import plan
+
+        result = plan(track, env_cfg.quad)  # solved and cached when missing
+        if env_cfg.reward.path:
+            venv.core.set_reference(result.passage_paths())
+        if plan_start > 0:
+            venv.core.set_plan(result)
     venv.seed(seed)
     if cfg.perception.enabled:
         camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
@@ -136,14 +144,6 @@ def make_train_env(
     features = features or run_features(cfg)
     venv = FeatureVecEnv(venv, features)
     return PrivilegedVecEnv(venv, features) if cfg.privileged_critic else venv
-
-
-def plan_reference(track: Track, quad: QuadParams) -> list[np.ndarray]:
-    """The time-optimal plan's path to each passage of ``track`` (the ``plan-line`` reward's
-    reference): the cached plan of (track, quad), solved and cached first when missing."""
-    from icarus_vision.planning.planner import plan
-
-    return plan(track, quad).passage_paths()
 
 
 LAP_WEIGHT = 0.1
@@ -271,7 +271,7 @@ def train_policy(
     features = run_features(cfg)
     env = make_train_env(
         cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage), features,
-        stages.layout_replay, quad, stages.crash_replay,
+        stages.layout_replay, quad, stages.crash_replay, stages.plan_start,
     )  # fmt: skip
     if resume:
         try:

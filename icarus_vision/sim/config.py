@@ -117,6 +117,12 @@ class EnvConfig:
     before it crashed (on that drone's track, with its parameters, wind and clock) instead of
     from the start (the state replay of hard moments; training on the batched backend). Each
     crash is replayed once. 0: every episode from the start."""
+    plan_start: float = 0.0
+    """Fixed tracks: the chance that an episode starts from a state of the track's time-optimal
+    plan (position, velocity, attitude, body rates and thrust at a node drawn uniformly between
+    the passages, the next passage its target, the clock at the node's time) instead of from the
+    start, so the policy meets the plan's line at the plan's speed (``RaceCore.set_plan``;
+    training on the batched backend). 0: every episode from the start."""
     crash_replay_s: tuple[float, float] = (0.4, 1.6)
     """How long before the crash the replayed state was flown, s: drawn uniformly in this range
     (to the nearest snapshot; snapshots every 0.2 s, kept for 2 s)."""
@@ -162,6 +168,8 @@ class EnvConfig:
             raise ValueError(f"layout_replay must be in [0, 1), got {self.layout_replay}")
         if not 0.0 <= self.crash_replay < 1.0:
             raise ValueError(f"crash_replay must be in [0, 1), got {self.crash_replay}")
+        if not 0.0 <= self.plan_start < 1.0:
+            raise ValueError(f"plan_start must be in [0, 1), got {self.plan_start}")
         lo, hi = self.crash_replay_s
         if not 0.0 < lo <= hi <= 2.0:
             raise ValueError(

@@ -39,6 +39,7 @@ TAKEOFF_CLEARANCE = 0.1  # m above the ground (sphere bottom) that counts as air
 RANDOM_TRACK_GATES = 10
 REPLAY_CAPACITY = 1024  # failed layouts kept for ``layout_replay``, newest kept
 SNAPSHOT_S = 0.2  # crash replay: a snapshot of each drone's flight every this many seconds
+PLAN_START_CLEARANCE_M = 0.5  # plan starts: a node's least distance from the gates either side
 SNAPSHOT_SLOTS = 10  # ... the last ten kept (2 s)
 _SNAP_STATE = ("pos", "vel", "quat", "omega", "thrust")
 
@@ -86,6 +87,7 @@ class RaceCore:
         self.crashes: list[dict] = []  # moments before crashes, for ``cfg.crash_replay``
         self.ref_path: np.ndarray | None = None  # (P, M + 1, 3): ``set_reference``
         self.ref_arc: np.ndarray | None = None  # (P, M + 1) arc length along each
+        self.plan_nodes: dict[str, np.ndarray] | None = None  # ``set_plan``: start states
         self._snap_every = max(1, round(SNAPSHOT_S * cfg.ctrl_hz))
         if cfg.crash_replay > 0:
             self.snaps = {
@@ -161,6 +163,69 @@ class RaceCore:
         steps = np.linalg.norm(np.diff(ref, axis=1), axis=2)
         self.ref_arc = np.concatenate([np.zeros((len(ref), 1)), np.cumsum(steps, axis=1)], axis=1)
 
+    def set_plan(self, plan, clearance_m: float = PLAN_START_CLEARANCE_M) -> None:
+        """The time-optimal plan of the fixed track (a ``planning.PlanResult``) that
+        ``cfg.plan_start`` episodes start from: any node between two passages whose position
+        keeps ``clearance_m`` from the centres of the gates on either side (so that the gates'
+        jitter neither puts a start behind its target's plane nor inside the gate just passed)."""
+        if self.base_track is None:
+            raise ValueError("plan starts need a fixed track (random tracks have none)")
+        gate_nodes = np.asarray(plan.gate_nodes, dtype=np.int64)
+        if len(gate_nodes) != self.base_track.num_passages:
+            raise ValueError(
+                f"plan: {len(gate_nodes)} passages for {self.base_track.num_passages} on the track"
+            )
+        k = np.arange(len(plan.t))
+        target = np.searchsorted(gate_nodes, k, side="left")  # passages at nodes before k
+        inner = (k > 0) & (target < len(gate_nodes)) & ~np.isin(k, gate_nodes)
+        centres = np.array([g.pos for g in self.base_track.passages])
+        pos = np.asarray(plan.pos, dtype=np.float64)
+        ahead = np.linalg.norm(pos - centres[np.minimum(target, len(centres) - 1)], axis=1)
+        behind = np.where(
+            target > 0, np.linalg.norm(pos - centres[np.maximum(target - 1, 0)], axis=1), np.inf
+        )
+        ok = inner & (ahead >= clearance_m) & (behind >= clearance_m)
+        if not ok.any():
+            raise ValueError(f"plan: no node keeps {clearance_m} m from the gates")
+        crossed = np.asarray(plan.t, dtype=np.float64)[gate_nodes]
+        self.plan_nodes = {
+            "t": np.asarray(plan.t, dtype=np.float64)[ok], "pos": pos[ok],
+            "vel": np.asarray(plan.vel, dtype=np.float64)[ok],
+            "quat": np.asarray(plan.quat, dtype=np.float64)[ok],
+            "omega": np.asarray(plan.rates, dtype=np.float64)[ok],
+            "thrust": np.asarray(plan.thrust, dtype=np.float64)[ok],
+            "target": target[ok], "crossed": crossed,
+        }  # fmt: skip
+
+    def _plan_node(self, rng: np.random.Generator) -> int | None:
+        """A plan node to start from, or None (``cfg.plan_start``; nothing drawn when it is 0)."""
+        if self.cfg.plan_start <= 0:
+            return None
+        if self.plan_nodes is None:
+            raise RuntimeError("plan_start needs the track's plan: RaceCore.set_plan")
+        if rng.random() >= self.cfg.plan_start:
+            return None
+        return int(rng.integers(len(self.plan_nodes["t"])))
+
+    def _start_from_plan(self, k: int, i: int, node: int, state: QuadState) -> None:
+        """Drone ``i`` (row ``k`` of ``state``) starts at plan node ``node``: the plan's state, its
+        thrust scaled to this drone's mass (the plan's acceleration), its clock and laps."""
+        m = self.plan_nodes
+        for name in ("pos", "vel", "quat", "omega"):
+            getattr(state, name)[k] = m[name][node]
+        p = self.params
+        state.thrust[k] = min(m["thrust"][node] * p.mass[i] / self.cfg.quad.mass, p.thrust_max[i])
+        j = int(m["target"][node])
+        self.target[i], self.t[i] = j, m["t"][node]
+        laps = j // self.gates_per_lap[i]
+        ends = m["crossed"][self.gates_per_lap[i] - 1 :: self.gates_per_lap[i]][:laps]
+        self.lap_times[i] = list(np.diff(np.concatenate([[0.0], ends])))
+        self.n_laps[i] = laps
+        self.lap_start[i] = ends[-1] if laps else 0.0
+        self.last_lap_time[i] = self.lap_times[i][-1] if laps else np.nan
+        self.taken_off[i] = True
+        self.replayed[i] = True  # not a start: the curriculum does not count it
+
     def set_difficulty(self, difficulty: float | None) -> None:
         """Race-layout difficulty of random tracks from the next reset on (curriculum hook).
 
@@ -215,7 +280,7 @@ class RaceCore:
         cfg, r = self.cfg, self.cfg.randomization
         state = QuadState.zeros(len(idx))
         start_yaw = np.zeros(len(idx))
-        restored = []
+        restored, planned = [], []
         for k, i in enumerate(idx):
             rng = self.rngs[i]
             moment = self._replay_crash(rng)
@@ -253,6 +318,9 @@ class RaceCore:
             start_yaw[k] = math.radians(track.start_yaw_deg)
             self.max_t[i] = cfg.max_episode_s if cfg.max_episode_s is not None else 5.0 + 3.0 * m
             self.lap_times[i] = []
+            node = self._plan_node(rng)
+            if node is not None:
+                planned.append((k, i, node))
         state.quat[:] = rpy_to_quat(np.stack((0 * start_yaw, 0 * start_yaw, start_yaw), axis=1))
         self.target[idx] = 0
         self.prev_action[idx] = np.nan
@@ -270,6 +338,8 @@ class RaceCore:
             self.snaps["t"][idx] = np.nan
         for k, i, moment in restored:
             self._restore(k, i, moment, state)
+        for k, i, node in planned:
+            self._start_from_plan(k, i, node, state)
         return state
 
     # -- crash replay ------------------------------------------------------------------------

@@ -411,6 +411,25 @@ def test_plan_line_measures_progress_along_the_tracks_plan(tmp_path, monkeypatch
     env.step(np.tile([0.8, 0.0, 0.0, 0.0], (2, 1)))  # the path term is computed, not refused
 
 
+def test_plan_starts_train_from_the_tracks_plan(tmp_path, monkeypatch):
+    """curriculum.plan_start: refused without a fixed track; the training env solves and caches
+    the track's plan and starts that share of its episodes from the plan's states."""
+    with pytest.raises(ValueError, match="plan_start needs a fixed track"):
+        config_from_dict({"curriculum": {"plan_start": 0.5}})
+    monkeypatch.chdir(tmp_path)  # the plan is cached under ./runs/plans
+    cfg = replace(SPECIALIST, track="single-gate")
+    env = make_train_env(cfg, num_envs=16, num_gates=1, seed=0, plan_start=0.5)
+    assert list((tmp_path / "runs" / "plans").glob("single-gate-*.npz"))
+    base = env
+    while hasattr(base, "venv"):  # under the perception noise and feature wrappers
+        base = base.venv
+    assert base.core.plan_nodes is not None
+    env.reset()
+    assert 0 < base.core.replayed.sum() < 16  # some episodes started along the plan
+    assert np.all(base.state.pos[base.core.replayed, 0] > 0.0)  # left the start for x = 5
+    env.step(np.tile([0.8, 0.0, 0.0, 0.0], (16, 1)))
+
+
 @pytest.mark.parametrize(
     "path", sorted(Path(__file__).parents[2].joinpath("configs").glob("policy-*.toml")), ids=str
 )
