@@ -39,8 +39,8 @@ TAKEOFF_CLEARANCE = 0.1  # m above the ground (sphere bottom) that counts as air
 RANDOM_TRACK_GATES = 10
 REPLAY_CAPACITY = 1024  # failed layouts kept for ``layout_replay``, newest kept
 SNAPSHOT_S = 0.2  # crash replay: a snapshot of each drone's flight every this many seconds
-PLAN_START_CLEARANCE_M = 0.5  # plan starts: a node's least distance from the gates either side
 SNAPSHOT_SLOTS = 10  # ... the last ten kept (2 s)
+PLAN_START_CLEARANCE_M = 0.5  # plan starts: a node's least distance from the gates either side
 _SNAP_STATE = ("pos", "vel", "quat", "omega", "thrust")
 
 
@@ -197,13 +197,14 @@ class RaceCore:
             "target": target[ok], "crossed": crossed,
         }  # fmt: skip
 
-    def _plan_node(self, rng: np.random.Generator) -> int | None:
-        """A plan node to start from, or None (``cfg.plan_start``; nothing drawn when it is 0)."""
+    def _plan_node(self, rng: np.random.Generator, passages: int) -> int | None:
+        """A plan node to start from, or None (``cfg.plan_start``; nothing drawn when it is 0).
+        ``passages``: the episode's; a track cut short by the curriculum starts from the start."""
         if self.cfg.plan_start <= 0:
             return None
         if self.plan_nodes is None:
             raise RuntimeError("plan_start needs the track's plan: RaceCore.set_plan")
-        if rng.random() >= self.cfg.plan_start:
+        if rng.random() >= self.cfg.plan_start or passages != len(self.plan_nodes["crossed"]):
             return None
         return int(rng.integers(len(self.plan_nodes["t"])))
 
@@ -318,7 +319,7 @@ class RaceCore:
             start_yaw[k] = math.radians(track.start_yaw_deg)
             self.max_t[i] = cfg.max_episode_s if cfg.max_episode_s is not None else 5.0 + 3.0 * m
             self.lap_times[i] = []
-            node = self._plan_node(rng)
+            node = self._plan_node(rng, m)
             if node is not None:
                 planned.append((k, i, node))
         state.quat[:] = rpy_to_quat(np.stack((0 * start_yaw, 0 * start_yaw, start_yaw), axis=1))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -94,6 +95,16 @@ def test_plan_start_zero_draws_nothing_and_episodes_stay_the_same():
     for a, b in zip(plain.state.__dict__.values(), env.state.__dict__.values(), strict=True):
         assert np.array_equal(a, b)
     assert np.array_equal(plain.core.params.mass, env.core.params.mass)
+
+
+def test_a_track_cut_short_by_the_curriculum_starts_from_the_start():
+    two_gates = replace(TRACK, gates=TRACK.gates * 2, laps=1)  # the plan's two passages
+    env = BatchedRacingVecEnv(8, EnvConfig(track=two_gates, plan_start=0.99, randomization=RND))
+    env.core.set_plan(fake_plan())
+    env.core.set_num_gates(1)  # the first gate only: the plan's second passage is not flown
+    env.seed(5)
+    env.reset()
+    assert not env.core.replayed.any() and np.all(env.core.t == 0)
 
 
 def test_plan_starts_refused_without_a_plan_or_a_fixed_track():
