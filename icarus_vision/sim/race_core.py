@@ -175,11 +175,14 @@ class RaceCore:
             raise ValueError(
                 f"plan: {len(gate_nodes)} passages for {self.base_track.num_passages} on the track"
             )
-        k = np.arange(len(plan.t))
+        attr_of = {"t": "t", "pos": "pos", "vel": "vel", "quat": "quat", "omega": "rates",
+                   "thrust": "thrust"}  # fmt: skip  # start state <- plan attribute
+        nodes = {n: np.asarray(getattr(plan, a), dtype=np.float64) for n, a in attr_of.items()}
+        k = np.arange(len(nodes["t"]))
         target = np.searchsorted(gate_nodes, k, side="left")  # passages at nodes before k
         inner = (k > 0) & (target < len(gate_nodes)) & ~np.isin(k, gate_nodes)
         centres = np.array([g.pos for g in self.base_track.passages])
-        pos = np.asarray(plan.pos, dtype=np.float64)
+        pos = nodes["pos"]
         ahead = np.linalg.norm(pos - centres[np.minimum(target, len(centres) - 1)], axis=1)
         behind = np.where(
             target > 0, np.linalg.norm(pos - centres[np.maximum(target - 1, 0)], axis=1), np.inf
@@ -187,15 +190,9 @@ class RaceCore:
         ok = inner & (ahead >= clearance_m) & (behind >= clearance_m)
         if not ok.any():
             raise ValueError(f"plan: no node keeps {clearance_m} m from the gates")
-        crossed = np.asarray(plan.t, dtype=np.float64)[gate_nodes]
-        self.plan_nodes = {
-            "t": np.asarray(plan.t, dtype=np.float64)[ok], "pos": pos[ok],
-            "vel": np.asarray(plan.vel, dtype=np.float64)[ok],
-            "quat": np.asarray(plan.quat, dtype=np.float64)[ok],
-            "omega": np.asarray(plan.rates, dtype=np.float64)[ok],
-            "thrust": np.asarray(plan.thrust, dtype=np.float64)[ok],
-            "target": target[ok], "crossed": crossed,
-        }  # fmt: skip
+        self.plan_nodes = {n: v[ok] for n, v in nodes.items()}
+        self.plan_nodes["target"] = target[ok]
+        self.plan_nodes["crossed"] = nodes["t"][gate_nodes]
 
     def _plan_node(self, rng: np.random.Generator, passages: int) -> int | None:
         """A plan node to start from, or None (``cfg.plan_start``; nothing drawn when it is 0).
@@ -220,12 +217,8 @@ class RaceCore:
         self.target[i], self.t[i] = j, m["t"][node]
         laps = j // self.gates_per_lap[i]
         ends = m["crossed"][self.gates_per_lap[i] - 1 :: self.gates_per_lap[i]][:laps]
-        self.lap_times[i] = list(np.diff(np.concatenate([[0.0], ends])))
-        self.n_laps[i] = laps
         self.lap_start[i] = ends[-1] if laps else 0.0
-        self.last_lap_time[i] = self.lap_times[i][-1] if laps else np.nan
-        self.taken_off[i] = True
-        self.replayed[i] = True  # not a start: the curriculum does not count it
+        self._resume(i, np.diff(np.concatenate([[0.0], ends])).tolist())
 
     def set_difficulty(self, difficulty: float | None) -> None:
         """Race-layout difficulty of random tracks from the next reset on (curriculum hook).
@@ -408,7 +401,6 @@ class RaceCore:
 
     def _restore(self, k: int, i: int, m: dict, state: QuadState) -> None:
         """Drone ``i`` (row ``k`` of ``state``) starts from the kept moment ``m``."""
-        self.replayed[i] = True
         self._set_track(i, m["layout"], m["track"], m["difficulty"])
         p = self.params
         p.mass[i], p.thrust_max[i], p.motor_tau[i] = m["mass"], m["thrust_max"], m["motor_tau"]
@@ -419,8 +411,14 @@ class RaceCore:
             getattr(state, name)[k] = m[name]
         self.prev_action[i] = m["prev_action"]
         self.t[i], self.lap_start[i], self.target[i] = m["t"], m["lap_start"], m["target"]
+        self._resume(i, m["lap_times"])
+
+    def _resume(self, i: int, lap_times: list[float]) -> None:
+        """Drone ``i`` goes on mid-race (a crash replay or a plan start) with ``lap_times`` done:
+        in the air, and not a start the curriculum counts."""
+        self.replayed[i] = True
         self.taken_off[i] = True
-        self.lap_times[i] = list(m["lap_times"])
+        self.lap_times[i] = list(lap_times)
         self.n_laps[i] = len(self.lap_times[i])
         self.last_lap_time[i] = self.lap_times[i][-1] if self.lap_times[i] else np.nan
 
