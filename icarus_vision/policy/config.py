@@ -195,6 +195,11 @@ class TrainConfig:
     and velocity in the next gate's frame and its straight-on crossing point; extended and racing
     observations); None: the ``init`` policy's (so ``--init default`` continues the shipped
     generalist as it reads), v1 without one."""
+    reference: str | None = None
+    """"plan": the policy also reads its track's time-optimal plan where the drone is (the nearest
+    node's offset, velocity, the velocity 0.3 s on, thrust axis and thrust: ``policy/reference.py``;
+    a fixed track and the extended or racing observation; the plan is solved and cached when
+    missing, and travels in the exported policy); None: it does not."""
     max_episode_s: float | None = None
     """Episode time limit; None: the environment default (5 s + 3 s per gate)."""
     track: str | None = None
@@ -292,6 +297,7 @@ def validate_train_config(c: TrainConfig) -> None:
         ("reward", c.reward in REWARD_PRESETS),
         ("observation", c.observation in OBS_DIMS),
         ("features", c.features is None or c.features in FEATURES_VERSIONS),
+        ("reference", c.reference in (None, "plan")),
         ("checkpoint_every", c.checkpoint_every >= 1),
         ("eval_every", c.eval_every >= 1),
         ("eval_episodes", c.eval_episodes >= 1),
@@ -328,6 +334,11 @@ def validate_train_config(c: TrainConfig) -> None:
         raise ValueError("train config: reward 'plan-line' needs a fixed track (set track)")
     if c.curriculum.plan_start > 0 and c.track is None:
         raise ValueError("train config: curriculum.plan_start needs a fixed track (set track)")
+    if c.reference is not None and (c.track is None or c.observation == "basic"):
+        raise ValueError(
+            "train config: reference 'plan' needs a fixed track (set track) and the extended or "
+            "racing observation"
+        )
     for sub in (c.ppo, c.randomization, c.perception):
         for f in fields(sub):
             v = getattr(sub, f.name)

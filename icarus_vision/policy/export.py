@@ -4,7 +4,9 @@ Format ``icarus-policy-v1`` (two files side by side, ``NAME.safetensors`` and ``
 the JSON names the observation (``basic`` 15-D, ``extended`` 21-D or ``racing`` 25-D, gate
 vectors in the world frame), the feature transform version, the hidden layers and activation, and the action semantics
 (``ctbr``: [thrust, roll_rate, pitch_rate, yaw_rate] in [-1, 1]). Inference is plain numpy:
-features -> tanh MLP -> mean action, clipped to [-1, 1] (the deterministic policy).
+features -> tanh MLP -> mean action, clipped to [-1, 1] (the deterministic policy). A specialist
+trained with its track's plan features (``"reference": "plan"``) carries the plan in its tensors
+(``ref.*``: ``policy/reference.py``) and appends its features to the transform's.
 """
 
 from __future__ import annotations
@@ -25,8 +27,9 @@ from icarus_vision.policy.features import (
     FEATURES_VERSION,
     FEATURES_VERSIONS,
     feature_dim,
-    obs_to_features,
+    policy_input,
 )
+from icarus_vision.policy.reference import PlanReference
 from icarus_vision.sim.observation import OBS_DIMS
 from icarus_vision.sim.quad import QuadParams
 
@@ -54,9 +57,11 @@ def export_sb3_policy(
     observation: str,
     meta: dict | None = None,
     features: str = FEATURES_VERSION,
+    reference: PlanReference | None = None,
 ) -> Path:
     """Write a stable-baselines3 PPO MlpPolicy's actor as ``path``.safetensors + ``path``.json;
-    ``features`` names the feature transform it was trained on.
+    ``features`` names the feature transform it was trained on, ``reference`` the plan whose
+    features it reads after them (None: none).
 
     Returns:
         The .safetensors path.
@@ -84,6 +89,9 @@ def export_sb3_policy(
         "action_dim": 4,
         "meta": meta or {},
     }
+    if reference is not None:
+        desc["reference"] = "plan"
+        tensors |= reference.tensors()
     return _write(path, tensors, desc)
 
 
@@ -94,6 +102,9 @@ class ExportedPolicy:
     weights: list[tuple[np.ndarray, np.ndarray]]
     desc: dict
     path: Path
+    reference: PlanReference | None = None
+    """The track's plan whose features the policy reads after the transform's (specialists
+    trained with ``reference = "plan"``), or None."""
 
     @property
     def obs_dim(self) -> int:
@@ -143,7 +154,7 @@ class ExportedPolicy:
             raise ValueError(
                 f"policy {self.path} expects observations of {self.obs_dim} entries, got shape {obs.shape}"
             )
-        h = obs_to_features(x, self.features)
+        h = policy_input(x, self.features, self.reference)
         for w, b in self.weights[:-1]:
             h = np.tanh(h @ w.T + b)
         w, b = self.weights[-1]
@@ -197,17 +208,28 @@ def load_policy(path: str | Path, expect_obs_dim: int | None = None) -> Exported
         isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in hidden
     ):
         raise ValueError(f"{js}: hidden must be a list of layer widths, got {hidden!r}")
+    reference = None
+    if desc.get("reference") is not None:
+        if desc["reference"] != "plan":
+            raise ValueError(f"{js}: unknown reference {desc['reference']!r} (expected 'plan')")
+        try:
+            reference = PlanReference.from_tensors(tensors)
+        except ValueError as e:
+            raise ValueError(f"{st}: {e}") from None
+        if desc["obs_dim"] < OBS_DIMS["extended"]:
+            raise ValueError(f"{js}: plan features need the extended or racing observation")
     n = len(hidden) + 1
     try:
         weights = [(tensors[f"w{i}"], tensors[f"b{i}"]) for i in range(n)]
     except KeyError as e:
         raise ValueError(f"{st}: missing tensor {e}") from None
     if (
-        weights[0][0].shape[1] != feature_dim(desc["obs_dim"], desc["features"])
+        weights[0][0].shape[1]
+        != feature_dim(desc["obs_dim"], desc["features"]) + (reference.dim if reference else 0)
         or weights[-1][0].shape[0] != 4
     ):
         raise ValueError(f"{st}: layer shapes do not match the description in {js.name}")
-    return ExportedPolicy(weights, desc, st)
+    return ExportedPolicy(weights, desc, st, reference)
 
 
 def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None = None) -> Path:
@@ -228,7 +250,7 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
     if not paths:
         raise ValueError("average of no policies: give at least one")
     policies = [load_policy(p) for p in paths]
-    keys = ("observation", "obs_dim", "features", "hidden", "activation")
+    keys = ("observation", "obs_dim", "features", "hidden", "activation", "reference")
     first = policies[0]
     for pol in policies[1:]:
         differ = [k for k in keys if pol.desc.get(k) != first.desc.get(k)]
@@ -243,6 +265,8 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
         for j, name in enumerate(("w", "b")):
             stack = np.stack([pol.weights[i][j] for pol in policies]).astype(np.float32)
             tensors[f"{name}{i}"] = stack.mean(axis=0, dtype=np.float32)
+    if first.reference is not None:  # one run's policies fly one track's plan
+        tensors |= first.reference.tensors()
     desc = {k: v for k, v in first.desc.items() if k != "meta"}
     desc["meta"] = {**(meta or {}), "averaged": [str(pol.path.with_suffix("")) for pol in policies],
                     "quad": first.quad}  # fmt: skip
@@ -250,7 +274,7 @@ def average_policies(paths: list[str | Path], out: str | Path, meta: dict | None
 
 
 def load_init_actor(
-    model, spec: str, observation: str, features: str = FEATURES_VERSION
+    model, spec: str, observation: str, features: str = FEATURES_VERSION, reference: bool = False
 ) -> ExportedPolicy:
     """Copy an exported policy's actor into a fresh stable-baselines3 PPO model (fine-tuning).
 
@@ -262,13 +286,16 @@ def load_init_actor(
     weight, so the wider actor computes exactly the exported one's actions and training grows the
     new units from there. A version 1 policy starts a version 2 run the same way (version 2
     appends its features after version 1's); a version 2 policy continues only with version 2
-    features of its own observation.
+    features of its own observation. A run with plan features (``reference``) starts from a
+    policy without them the same way (they come last); a policy with them continues only a run
+    with them, of its own observation and transform.
 
     Args:
         model: PPO with an MlpPolicy whose actor has the exported policy's hidden layers.
         spec: ``default`` (the shipped generalist), a shipped name, or a path to an exported policy.
         observation: the run's observation (``basic``, ``extended`` or ``racing``).
         features: the run's feature transform.
+        reference: whether the run reads plan features after the transform's.
 
     Raises:
         ValueError: the policy reads a larger observation than the run's, features the run's
@@ -296,6 +323,14 @@ def load_init_actor(
             f"{policy.path}: it reads features {policy.features} of the {policy.observation} "
             f"observation, which this run's ({features}, {observation}) do not start with; set "
             f"features = 'v2' and observation = {policy.observation!r} in the config"
+        )
+    if policy.reference is not None and (
+        not reference or policy.obs_dim != OBS_DIMS[observation] or policy.features != features
+    ):
+        raise ValueError(
+            f"{policy.path}: it reads plan features after those of {policy.features} on the "
+            f"{policy.observation} observation; continue it with reference = 'plan', "
+            f"features = {policy.features!r} and observation = {policy.observation!r}"
         )
     weights = list(policy.weights)
     pol = model.policy

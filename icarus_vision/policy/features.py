@@ -131,26 +131,39 @@ def gate_frame_features(obs: np.ndarray) -> np.ndarray:
     )
 
 
-class FeatureVecEnv(VecEnvWrapper):
-    """Feeds ``obs_to_features`` (of ``version``) of the wrapped VecEnv's observations to the
-    learner."""
+def policy_input(obs: np.ndarray, version: str = FEATURES_V1, reference=None) -> np.ndarray:
+    """What the policy network reads: ``obs_to_features`` of ``version``, followed by the plan
+    features of ``reference`` (a ``reference.PlanReference``) when there is one."""
+    out = obs_to_features(obs, version)
+    if reference is None:
+        return out
+    return np.concatenate((out, reference.features(obs)), axis=1)
 
-    def __init__(self, venv: VecEnv, version: str = FEATURES_V1) -> None:
+
+class FeatureVecEnv(VecEnvWrapper):
+    """Feeds ``policy_input`` (of ``version`` and ``reference``) of the wrapped VecEnv's
+    observations to the learner."""
+
+    def __init__(self, venv: VecEnv, version: str = FEATURES_V1, reference=None) -> None:
         import gymnasium as gym
 
-        self.version = version
+        self.version, self.reference = version, reference
         dim = feature_dim(venv.observation_space.shape[0], version)
+        dim += 0 if reference is None else reference.dim
         space = gym.spaces.Box(-CLIP, CLIP, shape=(dim,), dtype=np.float32)
         super().__init__(venv, observation_space=space)
 
+    def _input(self, obs: np.ndarray) -> np.ndarray:
+        return policy_input(obs, self.version, self.reference)
+
     def reset(self) -> np.ndarray:
-        return obs_to_features(self.venv.reset(), self.version)
+        return self._input(self.venv.reset())
 
     def step_wait(self):
         obs, rew, done, infos = self.venv.step_wait()
         for i in np.flatnonzero(done):
             if "terminal_observation" in infos[i]:
-                infos[i]["terminal_observation"] = obs_to_features(
-                    infos[i]["terminal_observation"][None], self.version
+                infos[i]["terminal_observation"] = self._input(
+                    infos[i]["terminal_observation"][None]
                 )[0]
-        return obs_to_features(obs, self.version), rew, done, infos
+        return self._input(obs), rew, done, infos

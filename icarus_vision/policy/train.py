@@ -44,6 +44,7 @@ from icarus_vision.policy.critic import AsymmetricActorCriticPolicy, PrivilegedV
 from icarus_vision.policy.export import ExportedPolicy, export_sb3_policy, load_init_actor
 from icarus_vision.policy.features import FEATURES_V1, FEATURES_VERSIONS, FeatureVecEnv
 from icarus_vision.policy.perception_noise import ErrorModel, PerceptionNoiseVecEnv
+from icarus_vision.policy.reference import PlanReference
 from icarus_vision.sim.builtin import resolve_track
 from icarus_vision.sim.config import EnvConfig
 from icarus_vision.sim.quad import QuadParams, load_quad
@@ -124,7 +125,8 @@ def make_train_env(
         max_episode_s=cfg.max_episode_s,
     )
     venv = BatchedRacingVecEnv(num_envs, env_cfg)
-    if env_cfg.reward.path or plan_start > 0:
+    reference = None
+    if env_cfg.reward.path or plan_start > 0 or cfg.reference is not None:
         from icarus_vision.planning.planner import plan
 
         result = plan(track, env_cfg.quad)  # solved and cached when missing
@@ -132,6 +134,8 @@ def make_train_env(
             venv.core.set_reference(result.passage_paths())
         if plan_start > 0:
             venv.core.set_plan(result)
+        if cfg.reference is not None:
+            reference = PlanReference.from_plan(result, track, env_cfg.quad.thrust_max)
     venv.seed(seed)
     if cfg.perception.enabled:
         camera = env_cfg.quad.camera if cfg.perception.out_of_view else None
@@ -142,8 +146,15 @@ def make_train_env(
             bias_m=cfg.perception.bias_m, bias_share=cfg.perception.bias_share,
         )  # fmt: skip
     features = features or run_features(cfg)
-    venv = FeatureVecEnv(venv, features)
+    venv = FeatureVecEnv(venv, features, reference)
     return PrivilegedVecEnv(venv, features) if cfg.privileged_critic else venv
+
+
+def _feature_env(venv) -> FeatureVecEnv:
+    """The ``FeatureVecEnv`` in a training stack (``make_train_env``)."""
+    while not isinstance(venv, FeatureVecEnv):
+        venv = venv.venv
+    return venv
 
 
 LAP_WEIGHT = 0.1
@@ -273,6 +284,7 @@ def train_policy(
         cfg, p.num_envs, stages.stages[stage], seed, stages.difficulty_at(stage), features,
         stages.layout_replay, quad, stages.crash_replay, stages.plan_start,
     )  # fmt: skip
+    reference = _feature_env(env).reference  # the plan the policy reads, exported with it
     if resume:
         try:
             model = PPO.load(ckpt_dir / "last.zip", env=env, device="cpu")
@@ -309,7 +321,7 @@ def train_policy(
         with torch.no_grad():  # start from hover: mean thrust action balances gravity
             model.policy.action_net.bias[0] = quad.hover_thrust_action
         if cfg.init is not None:
-            load_init_actor(model, cfg.init, cfg.observation, features)
+            load_init_actor(model, cfg.init, cfg.observation, features, cfg.reference is not None)
 
     curriculum = CurriculumCallback(stages, stage=stage, verbose=verbose)
     metrics = MetricsCallback(curriculum, progress=progress)
@@ -369,11 +381,13 @@ def train_policy(
                 }
                 evaluated = out / "evaluated" / f"{self.num_timesteps:09d}"
                 evaluated.parent.mkdir(exist_ok=True)
-                export_sb3_policy(model, evaluated, cfg.observation, meta, features)
+                export_sb3_policy(model, evaluated, cfg.observation, meta, features, reference)
                 if (curriculum.stage, ev.score) > tuple(best):
                     best[:] = [curriculum.stage, ev.score]
                     meta = {**meta, "name": "best"}
-                    export_sb3_policy(model, out / "best", cfg.observation, meta, features)
+                    export_sb3_policy(
+                        model, out / "best", cfg.observation, meta, features, reference
+                    )
             if self.num_timesteps >= self.next_ckpt:
                 self.next_ckpt += cfg.checkpoint_every
                 _save_checkpoint(model, ckpt_dir, snapshot())
@@ -405,7 +419,9 @@ def train_policy(
     atomic_write_json(out / "metrics.json", metrics.rows)
     meta = {"name": out.name, "timesteps": int(model.num_timesteps), "num_gates": curriculum.num_gates,
             "seed": seed, "preset": cfg.preset, "quad": quad.name}  # fmt: skip
-    policy_path = export_sb3_policy(model, out / "policy", cfg.observation, meta, features)
+    policy_path = export_sb3_policy(
+        model, out / "policy", cfg.observation, meta, features, reference
+    )
     if not (out / "best.safetensors").exists():
         for ext in (".safetensors", ".json"):
             shutil.copyfile(out / f"policy{ext}", out / f"best{ext}")
