@@ -94,6 +94,7 @@ def evaluate_policy(
     la = as_config(lookahead)
     if isinstance(policy, ExportedPolicy):
         policy.check_quad(cfg.quad, "this evaluation")
+        policy.check_track(base, "this evaluation")
     elif la is not None:
         raise ValueError("--lookahead filters an exported policy, not the scripted controller")
     if backend == "batched":

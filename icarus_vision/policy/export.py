@@ -138,6 +138,22 @@ class ExportedPolicy:
                 stacklevel=3,
             )
 
+    def check_track(self, track, flight: str = "this race") -> None:
+        """Warn when the policy reads a plan (``reference``) of another track than ``track``
+        (None: random tracks): a gate of ``track`` more than 1 m from every planned one."""
+        if self.reference is None:
+            return
+        gates = np.array([g.pos for g in track.gates]) if track is not None else None
+        planned = self.reference.gate_pos
+        if gates is None or np.any(
+            np.min(np.linalg.norm(gates[:, None] - planned[None], axis=2), axis=1) > 1.0
+        ):
+            warnings.warn(
+                f"policy {self.name} reads the plan of the track it was trained on; {flight} "
+                "flies another track, where that plan does not lead through the gates",
+                stacklevel=3,
+            )
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Deterministic actions.
 

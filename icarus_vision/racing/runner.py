@@ -147,6 +147,7 @@ def run_race(
     pilot_spec = resolve_policy(policy, track=base)
     if isinstance(pilot_spec, ExportedPolicy):
         pilot_spec.check_quad(quad)
+        pilot_spec.check_track(base)
     la = as_config(lookahead)
     if la is not None and not isinstance(pilot_spec, ExportedPolicy):
         raise ValueError("--lookahead filters an exported policy, not the scripted controller")

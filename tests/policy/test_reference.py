@@ -178,3 +178,21 @@ def test_specialist_with_plan_features_trains_and_exports_its_plan(tmp_path, mon
         assert pol.reference is not None and pol.reference.pos.shape[0] == 1
         obs = obs_at([[0.0, 0.0, 1.0]], (5.0, 0.0, 2.0), 0.0)
         assert pol.act(obs).shape == (1, 4)
+
+
+def test_flying_a_plan_reading_policy_on_another_track_warns(tmp_path):
+    track = Track(name="line", gates=(Gate(pos=(5.0, 0.0, 2.0)),))
+    ref = PlanReference.from_plan(straight_plan(track), track, thrust_max=10.0)
+    pol = load_policy(
+        export_sb3_policy(small_model(ref), tmp_path / "s", "extended", None, FEATURES_V1, ref)
+    )
+    moved = Track(name="moved", gates=(Gate(pos=(5.0, 3.0, 2.0)),))
+    with pytest.warns(UserWarning, match="reads the plan of the track it was trained on"):
+        pol.check_track(moved)
+    with pytest.warns(UserWarning, match="another track"):
+        pol.check_track(None, "this evaluation")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pol.check_track(track.with_laps(2))  # its own track, any laps: no warning
