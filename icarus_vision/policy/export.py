@@ -143,10 +143,8 @@ class ExportedPolicy:
         (None: random tracks): a gate of ``track`` more than 1 m from every planned one."""
         if self.reference is None:
             return
-        gates = np.array([g.pos for g in track.gates]) if track is not None else None
-        planned = self.reference.gate_pos
-        if gates is None or np.any(
-            np.min(np.linalg.norm(gates[:, None] - planned[None], axis=2), axis=1) > 1.0
+        if track is None or np.any(
+            self.reference.gate_distance(np.array([g.pos for g in track.gates])) > 1.0
         ):
             warnings.warn(
                 f"policy {self.name} reads the plan of the track it was trained on; {flight} "

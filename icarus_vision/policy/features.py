@@ -111,6 +111,11 @@ def obs_to_features(obs: np.ndarray, version: str = FEATURES_V1) -> np.ndarray:
     return np.clip(out, -CLIP, CLIP, out=out).astype(np.float32)
 
 
+def passage_heading(obs: np.ndarray) -> np.ndarray:
+    """(N, 2) unit horizontal passage direction of the next gate (extended or racing observations)."""
+    return obs[:, 15:17] / np.maximum(np.linalg.norm(obs[:, 15:17], axis=1, keepdims=True), 1e-9)
+
+
 def gate_frame_features(obs: np.ndarray) -> np.ndarray:
     """(N, 8) the drone in the next gate's frame (extended or racing observations).
 
@@ -119,7 +124,7 @@ def gate_frame_features(obs: np.ndarray) -> np.ndarray:
     (/ ``NEAR_SCALE``) if the drone flew on straight at its velocity (at most ``MAX_LOOKAHEAD_S``,
     at least 1 m/s toward the plane; its offsets now once past the plane).
     """
-    heading = obs[:, 15:17] / np.maximum(np.linalg.norm(obs[:, 15:17], axis=1, keepdims=True), 1e-9)
+    heading = passage_heading(obs)
     c, s = heading[:, 0], heading[:, 1]
     local = _yaw_frame(-obs[:, 12:15], c, s)
     vel = _yaw_frame(obs[:, 3:6], c, s)

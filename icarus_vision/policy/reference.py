@@ -24,7 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from icarus_vision.policy.features import CLIP, NEAR_SCALE, VEL_SCALE, _yaw_frame
+from icarus_vision.policy.features import (
+    CLIP,
+    NEAR_SCALE,
+    VEL_SCALE,
+    _yaw_frame,
+    passage_heading,
+)
 from icarus_vision.sim.dynamics import quat_to_rot
 
 REFERENCE_DIM = 13
@@ -111,6 +117,10 @@ class PlanReference:
             raise ValueError(f"plan reference: missing tensors {', '.join(missing)}")
         return cls(**{k: np.asarray(tensors[f"ref.{k}"], np.float64) for k in REFERENCE_KEYS})
 
+    def gate_distance(self, points: np.ndarray) -> np.ndarray:
+        """(K,) distance of each of ``points`` (K, 3) to the nearest planned passage's gate."""
+        return np.min(np.linalg.norm(points[:, None] - self.gate_pos[None], axis=2), axis=1)
+
     def nearest(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(passage, node) of the reference node nearest each drone on the way to its gate.
 
@@ -119,18 +129,15 @@ class PlanReference:
         """
         p = obs[:, 0:3]
         gate = p + obs[:, 12:15]
-        heading = obs[:, 15:17] / np.maximum(
-            np.linalg.norm(obs[:, 15:17], axis=1, keepdims=True), 1e-9
-        )
         cost = np.linalg.norm(gate[:, None, :] - self.gate_pos[None], axis=2)
-        cost += 2.0 * (1.0 - heading @ self.gate_dir.T)  # (N, S)
+        cost += 2.0 * (1.0 - passage_heading(obs) @ self.gate_dir.T)  # (N, S)
         cand = np.argsort(cost, axis=1)[:, :MAX_MATCHES]  # (N, C) the best passages first
         best = np.take_along_axis(cost, cand, axis=1)
-        near = best[:, 1:] <= best[:, :1] + MATCH_SLACK  # as good as the best: the same gate
-        used = 1 + int(near.sum(axis=1).max(initial=0))
-        cand, best = cand[:, :used], best[:, :used]
+        match = best <= best[:, :1] + MATCH_SLACK  # as good as the best: the same gate
+        used = int(match.sum(axis=1).max())  # sorted, so the matches come first
+        cand, match = cand[:, :used], match[:, :used]
         d2 = np.sum((self.pos[cand] - p[:, None, None, :]) ** 2, axis=3)  # (N, C, M)
-        d2[best > best[:, :1] + MATCH_SLACK] = np.inf
+        d2[~match] = np.inf
         c, node = np.divmod(np.argmin(d2.reshape(len(obs), -1), axis=1), self.pos.shape[1])
         return cand[np.arange(len(obs)), c], node
 
